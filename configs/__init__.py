@@ -1,0 +1,1 @@
+"""YAML data shipped with spreadgym: materials, scenes, env and agent configs."""

@@ -1,0 +1,1 @@
+"""Gymnasium layer of spreadgym (installed as spreadgym.envs)."""
