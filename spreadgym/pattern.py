@@ -1,0 +1,288 @@
+"""Spread pattern scoring as a tray test does it (EN 13739-2, ISO 5690, ASABE S341).
+
+A row of trays across the track catches one pass. The single-pass transverse
+distribution is then overlapped with the neighbouring passes at bout width W and
+the coefficient of variation (CV) of the overlapped distribution is computed over
+the trays of one bout.
+
+Conventions (x across the track, to the right of the machine; SI units):
+
+* Trays: an odd number T = 2m + 1 of trays of width w, tray i (i = -m..m) centred
+  at c_i = i w and covering [c_i - w/2, c_i + w/2); the middle tray is on the
+  machine axis.
+* Passes are at x = j W (j integer), W = n w with n a positive integer, so every
+  pass lands on the tray grid and overlapping is exact index arithmetic.
+* Racetrack (progressive): every pass drives the same way; the field is
+  sum_j p(x - jW), periodic in W.
+* Back-and-forth (alternating): every other pass (odd j) drives the other way, so
+  its pattern is mirrored about its own axis, p(-(x - jW)). The field repeats every
+  2W and each bout between two passes is mirror-symmetric about its midline; the
+  bout between the right-hand sides of two passes differs from the bout between
+  their left-hand sides when the pattern is skewed.
+* One bout is the strip of n trays centred on a pass: the trays with centres in
+  [-W/2, W/2). For racetrack any n consecutive trays give the same values. For
+  back-and-forth this strip holds half of each kind of bout, so with n odd its
+  values are exactly those of the whole 2W period (each counted once instead of
+  twice); with n even the tray on one bout midline is in the strip and the tray on
+  the other is not (a half-tray effect). A symmetric pattern gives the same field,
+  hence the same numbers, for both driving patterns.
+* CV = 100 s / mean, s the sample standard deviation (ddof = 1) over the n trays of
+  one bout. With n = 1 the bout is one tray and the CV is 0 (nothing can vary at
+  the tray resolution); with no mass at all the CV is NaN.
+* Effective (working) width: the largest tested W whose CV is at or below the
+  threshold. The CV curve need not be monotone (a triangle's curve dips back to 0
+  at half and at its full base); the standards' working width is the largest W
+  that satisfies the criterion, so narrower widths that fail in between are not a
+  reason to stop early.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+
+from spreadgym.errors import ConfigError
+
+DRIVING = ("racetrack", "back-and-forth")
+_GRID_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Trays:
+    """One pass caught by a row of trays."""
+
+    center_m: np.ndarray  # (T,) tray centres across the track (x), i * width, T odd
+    mass_kg: np.ndarray  # (T,) mass collected per tray (single pass)
+    width_m: float
+
+    def __post_init__(self) -> None:
+        width = _check_tray_width(self.width_m)
+        center = np.asarray(self.center_m, dtype=float)
+        mass = np.asarray(self.mass_kg, dtype=float)
+        if center.ndim != 1 or mass.shape != center.shape:
+            raise ConfigError(
+                "trays", f"center_m and mass_kg must be 1-D of equal length, got {center.shape}, {mass.shape}"
+            )
+        if center.size % 2 != 1:
+            raise ConfigError("trays", f"need an odd number of trays centred on the axis, got {center.size}")
+        m = center.size // 2
+        grid = np.arange(-m, m + 1) * width
+        if not np.allclose(center, grid, rtol=0.0, atol=_GRID_TOL * max(width, 1.0) * (m + 1)):
+            raise ConfigError("trays", "tray centres must be i * width_m for i = -m..m")
+        if not np.all(np.isfinite(mass)) or np.any(mass < 0):
+            raise ConfigError("trays", "tray masses must be finite and >= 0")
+        object.__setattr__(self, "center_m", center)
+        object.__setattr__(self, "mass_kg", mass)
+        object.__setattr__(self, "width_m", width)
+
+    @property
+    def count(self) -> int:
+        return int(self.center_m.size)
+
+    @property
+    def total_kg(self) -> float:
+        return float(self.mass_kg.sum())
+
+    @property
+    def pattern_width_m(self) -> float:
+        """Width from the left edge of the outermost loaded tray on the left to the
+        right edge of the outermost loaded tray on the right (0 if empty)."""
+        loaded = np.flatnonzero(self.mass_kg > 0)
+        if loaded.size == 0:
+            return 0.0
+        return float((loaded[-1] - loaded[0] + 1) * self.width_m)
+
+    @property
+    def reach_trays(self) -> int:
+        """max |i| over loaded trays (0 if empty)."""
+        loaded = np.flatnonzero(self.mass_kg > 0)
+        if loaded.size == 0:
+            return 0
+        return int(np.max(np.abs(loaded - self.count // 2)))
+
+
+def _check_tray_width(tray_width_m) -> float:
+    w = float(tray_width_m)
+    if not (np.isfinite(w) and w > 0):
+        raise ConfigError("pattern.tray_width_m", f"must be a positive number of metres, got {tray_width_m!r}")
+    return w
+
+
+def _check_driving(driving: str) -> str:
+    if driving not in DRIVING:
+        raise ConfigError(
+            "pattern.driving", f"unknown driving pattern {driving!r}; allowed: {', '.join(DRIVING)}"
+        )
+    return driving
+
+
+def bout_tray_count(bout_width_m: float, tray_width_m: float) -> int:
+    """n = W / w, which must be a positive integer (to rounding)."""
+    w = _check_tray_width(tray_width_m)
+    W = float(bout_width_m)
+    ratio = W / w if np.isfinite(W) else np.nan
+    n = int(round(ratio)) if np.isfinite(ratio) else 0
+    if n < 1 or abs(ratio - n) > _GRID_TOL * max(1.0, ratio):
+        raise ConfigError(
+            "pattern.target_swath_m",
+            f"bout width {bout_width_m!r} m is not a positive multiple of the tray width {w} m",
+        )
+    return n
+
+
+def _tray_index(x_m: np.ndarray, w: float) -> np.ndarray:
+    """Index i of the tray [i w - w/2, i w + w/2) holding each x."""
+    return np.floor(x_m / w + 0.5).astype(np.int64)
+
+
+def collect(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) -> Trays:
+    """Catch granules landing at x_m (across the track) with masses mass_kg.
+
+    The row has an odd number of trays centred on the axis and is wide enough to
+    hold every granule and to reach at least min_half_width_m on each side."""
+    w = _check_tray_width(tray_width_m)
+    x = np.asarray(x_m, dtype=float).reshape(-1)
+    mass = np.broadcast_to(np.asarray(mass_kg, dtype=float), x.shape)
+    if not np.all(np.isfinite(x)):
+        raise ConfigError("x_m", "landing positions must be finite")
+    if not np.all(np.isfinite(mass)) or np.any(mass < 0):
+        raise ConfigError("mass_kg", "granule masses must be finite and >= 0")
+    half = float(min_half_width_m)
+    if not (np.isfinite(half) and half >= 0):
+        raise ConfigError("min_half_width_m", f"must be >= 0, got {min_half_width_m!r}")
+    idx = _tray_index(x, w)
+    m = int(np.max(np.abs(idx))) if idx.size else 0
+    m = max(m, int(np.ceil(half / w - 0.5 - _GRID_TOL)))
+    count = 2 * m + 1
+    masses = np.bincount(idx + m, weights=mass, minlength=count)
+    return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=masses, width_m=w)
+
+
+def _fold_matrix(tray_count: int, n: int, driving: str) -> np.ndarray:
+    """(n, T) matrix M with bout = M @ tray_masses.
+
+    Bout tray q sits at grid index k_q = q - n // 2 (centres in [-W/2, W/2)).
+    Racetrack: tray i reaches k when k = i (mod n).
+    Back-and-forth: unmirrored passes (even j) put tray i at k = i + j n, i.e.
+    k = i (mod 2n); mirrored passes (odd j) put it at k = j n - i, i.e.
+    k = n - i (mod 2n)."""
+    m = tray_count // 2
+    i = np.arange(-m, m + 1)[None, :]
+    k = (np.arange(n) - n // 2)[:, None]
+    if driving == "racetrack":
+        return ((k - i) % n == 0).astype(float)
+    return ((k - i) % (2 * n) == 0).astype(float) + ((k + i - n) % (2 * n) == 0).astype(float)
+
+
+def bout_pattern(trays: Trays, bout_width_m: float, driving: str) -> np.ndarray:
+    """The overlapped distribution over one bout (n = W / w values, kg per tray,
+    left to right, tray centres (q - n // 2) * w for q = 0..n-1)."""
+    _check_driving(driving)
+    n = bout_tray_count(bout_width_m, trays.width_m)
+    return _fold_matrix(trays.count, n, driving) @ trays.mass_kg
+
+
+def _cv_rows(values: np.ndarray) -> np.ndarray:
+    """CV in % of each row of `values` (.., n): ddof = 1; 0 for n = 1; NaN if empty."""
+    n = values.shape[-1]
+    mean = values.mean(axis=-1)
+    if n == 1:
+        return np.where(mean > 0, 0.0, np.nan)
+    sd = values.std(axis=-1, ddof=1)
+    safe = np.where(mean > 0, mean, 1.0)
+    return np.where(mean > 0, 100.0 * sd / safe, np.nan)
+
+
+def cv_percent(trays: Trays, bout_width_m: float, driving: str) -> float:
+    """Coefficient of variation (%) of the overlapped pattern over one bout."""
+    return float(_cv_rows(bout_pattern(trays, bout_width_m, driving)))
+
+
+def default_widths_m(trays: Trays) -> np.ndarray:
+    """Every multiple of the tray width from one tray up to the symmetric reach of
+    the pattern, (2 max|i| + 1) w over loaded trays: at least the pattern width and
+    at most about twice it. Beyond it neighbouring passes no longer meet."""
+    top = 2 * trays.reach_trays + 1
+    return np.arange(1, top + 1) * trays.width_m
+
+
+def cv_curve(
+    trays: Trays, driving: str, widths_m: Optional[Sequence[float]] = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(widths, CV %) over bout widths (default: `default_widths_m`)."""
+    _check_driving(driving)
+    widths = default_widths_m(trays) if widths_m is None else np.asarray(widths_m, dtype=float).reshape(-1)
+    cvs = np.array([cv_percent(trays, W, driving) for W in widths])
+    return widths, cvs
+
+
+def effective_swath_m(trays: Trays, driving: str, threshold_percent: float,
+                      widths_m: Optional[Sequence[float]] = None) -> float:
+    """The largest bout width whose CV is at or below threshold_percent (0.0 if
+    none). Non-monotone curves: the largest satisfying width wins, even if some
+    narrower widths fail."""
+    thr = float(threshold_percent)
+    if not (np.isfinite(thr) and thr > 0):
+        raise ConfigError("pattern.cv_threshold_percent", f"must be > 0, got {threshold_percent!r}")
+    widths, cvs = cv_curve(trays, driving, widths_m)
+    ok = np.isfinite(cvs) & (cvs <= thr * (1.0 + 1e-12))
+    return float(widths[ok].max()) if ok.any() else 0.0
+
+
+def cv_confidence_interval(
+    x_m,
+    mass_kg,
+    tray_width_m: float,
+    bout_width_m: float,
+    driving: str,
+    level: float = 0.95,
+    resamples: int = 200,
+    rng=None,
+) -> tuple[float, float]:
+    """Percentile bootstrap interval of the CV over granules.
+
+    Granules are resampled with replacement, caught again on the same trays and
+    overlapped; the interval is the central `level` part of the resampled CVs.
+    `rng`: a numpy Generator, a seed or None; the same seed gives the same answer."""
+    _check_driving(driving)
+    if not (0.0 < float(level) < 1.0):
+        raise ConfigError("level", f"must be in (0, 1), got {level!r}")
+    if int(resamples) != resamples or resamples < 2:
+        raise ConfigError("resamples", f"must be an integer >= 2, got {resamples!r}")
+    resamples = int(resamples)
+    trays = collect(x_m, mass_kg, tray_width_m)
+    n = bout_tray_count(bout_width_m, trays.width_m)
+    x = np.asarray(x_m, dtype=float).reshape(-1)
+    mass = np.broadcast_to(np.asarray(mass_kg, dtype=float), x.shape)
+    count = x.size
+    if count == 0:
+        return (float("nan"), float("nan"))
+    gen = np.random.default_rng(rng)
+    tray_of = _tray_index(x, trays.width_m) + trays.count // 2
+    fold = _fold_matrix(trays.count, n, driving)
+    cvs = np.empty(resamples)
+    chunk = max(1, min(resamples, 4_000_000 // count))
+    for start in range(0, resamples, chunk):
+        rows = min(chunk, resamples - start)
+        pick = gen.integers(0, count, size=(rows, count))
+        bins = tray_of[pick] + trays.count * np.arange(rows)[:, None]
+        tray_mass = np.bincount(bins.ravel(), weights=mass[pick].ravel(), minlength=rows * trays.count)
+        bouts = tray_mass.reshape(rows, trays.count) @ fold.T
+        cvs[start:start + rows] = _cv_rows(bouts)
+    tail = 50.0 * (1.0 - float(level))
+    lo, hi = np.percentile(cvs, [tail, 100.0 - tail])
+    return float(lo), float(hi)
+
+
+def mass_balance(released_kg: float, landed_kg: float, retained_kg: float = 0.0) -> dict[str, float]:
+    """Where the released mass went; `unaccounted_kg` should be ~0 (rounding)."""
+    released, landed, retained = float(released_kg), float(landed_kg), float(retained_kg)
+    return {
+        "released_kg": released,
+        "landed_kg": landed,
+        "retained_kg": retained,
+        "unaccounted_kg": released - landed - retained,
+        "landed_fraction": landed / released if released > 0 else float("nan"),
+    }
