@@ -32,6 +32,8 @@ class Departure:
     model: str
     dt_s: float  # time step the model used (0.0 for closed forms)
     notes: list[str] = field(default_factory=list)  # what the model decided and why
+    # Paths over the disc (machine frame, (T, 2) each) of the first few granules, for pictures.
+    tracks: list[np.ndarray] = field(default_factory=list)
 
     @property
     def departed(self) -> np.ndarray:

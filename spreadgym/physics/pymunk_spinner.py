@@ -123,8 +123,12 @@ def simulate_pymunk(
     contacts: Contacts,
     progress: Optional[Callable[[float], None]] = None,
     disc_friction_guard: bool = True,
+    track_count: int = 0,
 ) -> Departure:
-    """Run every granule from release to the disc edge; return their departure states."""
+    """Run every granule from release to the disc edge; return their departure states.
+
+    `track_count` granules (the first ones) also have their paths recorded for plots.
+    """
     omega = scene.spinner.omega_rad_s
     radius = scene.spinner.radius_m
     choice = choose_time_step(scene, float(granules.radius_m.min()))
@@ -153,6 +157,8 @@ def simulate_pymunk(
     stuck_accel = contacts.disc_friction * GRAVITY_M_S2
 
     steps = int(math.ceil(MAX_SPINNER_TIME_S / dt))
+    tracked = np.arange(min(track_count, n))
+    track_points = []
     t = 0.0
     for step in range(steps + 1):
         t = step * dt
@@ -190,6 +196,8 @@ def simulate_pymunk(
         finished = idx[leaving | stuck]
         active[finished] = False
         position[idx], velocity[idx], spin[idx] = new_pos, new_vel, new_spin
+        if tracked.size:
+            track_points.append(np.where(active[tracked, None], position[tracked], np.nan))
         if not active.any() or step == steps:
             break
 
@@ -221,6 +229,7 @@ def simulate_pymunk(
             progress(t)
 
     # Retained granules keep their last state.
+    tracks = _machine_frame_tracks(track_points, out_position[tracked], spinner_angle[tracked])
     kept = outcome != DEPARTED
     out_position[kept], out_velocity[kept], out_spin[kept] = position[kept], velocity[kept], spin[kept]
     out_height[kept], out_vz[kept], out_time[kept] = vertical.z[kept], vertical.vz[kept], t
@@ -238,7 +247,23 @@ def simulate_pymunk(
             f"time step {dt:.3g} s: {choice.reason}",
             f"free fall above the vane tops solved exactly ({t_fall * 1e3:.1f} ms)",
         ],
+        tracks=tracks,
     )
+
+
+def _machine_frame_tracks(points, end_points, start_angle) -> list[np.ndarray]:
+    """Recorded paths (one row per step, NaN once finished) in the machine frame.
+
+    The simulation frame is the machine frame turned by a constant angle per granule.
+    """
+    if not points:
+        return []
+    stacked = np.stack(points)  # (T, k, 2)
+    tracks = []
+    for k in range(stacked.shape[1]):
+        path = np.vstack([stacked[:, k][~np.isnan(stacked[:, k, 0])], end_points[k]])
+        tracks.append(rotate(path, np.full(path.shape[0], start_angle[k])))
+    return tracks
 
 
 def _crossing_fraction(p0: np.ndarray, p1: np.ndarray, radius: float) -> np.ndarray:
