@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import ndtr, ndtri
 
 from spreadgym.materials import Fertilizer
 from spreadgym.scene import Scene
@@ -78,10 +79,8 @@ def sample_granules(scene: Scene, fertilizer: Fertilizer, rng: np.random.Generat
 
 def _truncated_normal(rng, mean, sd, lo, hi, n) -> np.ndarray:
     """Inverse-CDF sampling of a normal truncated to [lo, hi] (no rejection loop)."""
-    from scipy.stats import norm
-
-    a, b = norm.cdf((lo - mean) / sd), norm.cdf((hi - mean) / sd)
-    return mean + sd * norm.ppf(a + (b - a) * rng.random(n))
+    a, b = ndtr((lo - mean) / sd), ndtr((hi - mean) / sd)
+    return mean + sd * ndtri(a + (b - a) * rng.random(n))
 
 
 def _clip_inside(xy: np.ndarray, radius: float) -> np.ndarray:

@@ -45,10 +45,11 @@ def run_spinner(
     contacts: Contacts,
     model: str,
     progress: Optional[Callable[[float], None]] = None,
+    tracks: int = 0,
 ) -> Departure:
-    """Departure states from the chosen spinner model."""
+    """Departure states from the chosen spinner model (`tracks` paths kept for plots)."""
     if model == "pymunk":
-        return simulate_pymunk(scene, granules, contacts, progress=progress)
+        return simulate_pymunk(scene, granules, contacts, progress=progress, track_count=tracks)
     raise AssertionError(f"model {model!r} has no runner")  # choose_model validated it
 
 
@@ -58,8 +59,13 @@ def run_scene(
     library: Optional[MaterialLibrary] = None,
     progress: Optional[Callable[[float], None]] = None,
     ci: bool = True,
+    tracks: int = 0,
 ) -> SimulationResult:
-    """Simulate `scene` end to end with a fresh random generator seeded by sim.seed."""
+    """Simulate `scene` end to end with a fresh random generator seeded by sim.seed.
+
+    `progress(t)` is called with the simulated spinner time (s); `ci` adds the bootstrap
+    interval of the CV; `tracks` keeps that many granule paths for pictures.
+    """
     started = time.perf_counter()
     library = library or load_library()
     chosen, reason = choose_model(scene, model)
@@ -68,7 +74,7 @@ def run_scene(
     rng = np.random.default_rng(scene.sim.seed)
     granules = sample_granules(scene, fertilizer, rng)
 
-    departure = run_spinner(scene, granules, contacts, chosen, progress)
+    departure = run_spinner(scene, granules, contacts, chosen, progress, tracks)
     launch = deflect_pymunk(
         departure, scene.deflectors, contacts.deflectors, granules.radius_m, granules.mass_kg,
         scene.granule.rotation,

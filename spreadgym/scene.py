@@ -8,6 +8,7 @@ Validation errors name the dotted key, the bad value and the allowed range.
 from __future__ import annotations
 
 import math
+import re
 from typing import Any, Literal, Mapping, Optional, Union
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -199,6 +200,9 @@ def _format_validation_error(exc: ValidationError) -> ConfigError:
     first = exc.errors()[0]
     key = ".".join(str(p) for p in first["loc"]) or "scene"
     message = first["msg"].removeprefix("Value error, ")
+    named = re.match(r"^([\w.\[\]]+): (.*)$", message, flags=re.S)
+    if named and key == "scene":  # whole-scene checks name their key in the message
+        key, message = named.groups()
     if first["type"] != "value_error":
         message += f" (got {first.get('input')!r})"
     return ConfigError(key, message)

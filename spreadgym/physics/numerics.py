@@ -8,7 +8,9 @@ granule at rest, |omega| * R_vane, so the no-tunnelling limit is
     dt_tunnel = (r_min + t/2) / (|omega| * R_vane)
 
 and the automatic step keeps half of it. The step also resolves the slide along the
-vane, whose growth rate is of order |omega|: |omega| * dt <= 0.01.
+vane, whose growth rate is of order |omega|: |omega| * dt <= 0.005 (measured:
+departure speed within 0.35 % of the exact slide over 200-1100 rpm, pitch +-30 deg;
+0.01 gives up to 0.56 %).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from spreadgym.errors import ConfigError
 from spreadgym.scene import Scene
 
 TUNNEL_SAFETY = 0.5
-OMEGA_DT_MAX = 0.01
+OMEGA_DT_MAX = 0.005
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from spreadgym.physics.numerics import choose_time_step, collision_bias_for
 from spreadgym.physics.vertical import GRAVITY_M_S2, VerticalState, free_fall_to
 from spreadgym.scene import Scene
 
-GRANULES_PER_SPACE = 100
+GRANULES_PER_SPACE = 200
 SOLVER_ITERATIONS = 10
 COLLISION_SLOP_M = 1e-5
 MAX_SPINNER_TIME_S = 3.0
@@ -182,14 +182,16 @@ def simulate_pymunk(
             out_time[li] = t - (1.0 - frac) * dt
             outcome[li] = DEPARTED
 
-        # Stuck: resting, carried along with the disc, and the centrifugal pull below
-        # what static disc friction holds.
+        # Stuck: resting, carried along with the disc (to within the drift one step of
+        # centripetal motion leaves), and the centrifugal pull below what static disc
+        # friction holds.
         rel = new_vel - disc_surface_velocity(new_pos, omega)
+        pull = omega * omega * r_new
         stuck = (
             ~leaving
             & vertical.resting[idx]
-            & (np.hypot(rel[:, 0], rel[:, 1]) < STUCK_SPEED_M_S)
-            & (omega * omega * r_new < stuck_accel)
+            & (np.hypot(rel[:, 0], rel[:, 1]) < STUCK_SPEED_M_S + 2.0 * pull * dt)
+            & (pull < stuck_accel)
         )
         if stuck.any():
             outcome[idx[stuck]] = RETAINED_STUCK

@@ -1,0 +1,24 @@
+"""Shared fixtures: the material library and small, fast scenes."""
+
+import numpy as np
+import pytest
+
+from spreadgym.contacts import resolve_contacts
+from spreadgym.granules import sample_granules
+from spreadgym.materials import load_library
+
+
+@pytest.fixture(scope="session")
+def library():
+    return load_library()
+
+
+@pytest.fixture
+def prepare(library):
+    """(granules, contacts) for a scene, sampled with the scene's seed."""
+
+    def _prepare(scene):
+        granules = sample_granules(scene, library.fertilizer(scene.fertilizer), np.random.default_rng(scene.sim.seed))
+        return granules, resolve_contacts(scene, library)
+
+    return _prepare
