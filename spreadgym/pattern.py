@@ -241,10 +241,14 @@ def cv_confidence_interval(
     resamples: int = 200,
     rng=None,
 ) -> tuple[float, float]:
-    """Percentile bootstrap interval of the CV over granules.
+    """Basic (pivotal) bootstrap interval of the CV over granules.
 
     Granules are resampled with replacement, caught again on the same trays and
-    overlapped; the interval is the central `level` part of the resampled CVs.
+    overlapped. A CV from finitely many granules is biased upwards by their counting
+    noise, and a resampled CV twice over; the basic interval (2 CV - q_hi, 2 CV - q_lo),
+    clipped at 0, carries that bias back. The percentile interval does not: for a
+    Gaussian pattern with a true CV of 10.8 % and 500-2000 granules it covered the
+    true CV in 3-56 % of trials against 91-92 % for the basic one (tests check it).
     `rng`: a numpy Generator, a seed or None; the same seed gives the same answer."""
     _check_driving(driving)
     if not (0.0 < float(level) < 1.0):
@@ -272,8 +276,9 @@ def cv_confidence_interval(
         bouts = tray_mass.reshape(rows, trays.count) @ fold.T
         cvs[start:start + rows] = _cv_rows(bouts)
     tail = 50.0 * (1.0 - float(level))
-    lo, hi = np.percentile(cvs, [tail, 100.0 - tail])
-    return float(lo), float(hi)
+    q_lo, q_hi = np.percentile(cvs, [tail, 100.0 - tail])
+    point = float(_cv_rows(trays.mass_kg @ fold.T))
+    return max(0.0, 2.0 * point - float(q_hi)), 2.0 * point - float(q_lo)
 
 
 def mass_balance(released_kg: float, landed_kg: float, retained_kg: float = 0.0) -> dict[str, float]:

@@ -90,7 +90,7 @@ def run_scene(
     p = scene.pattern
     trays = pattern.collect(landing.position_m[:, 0], landed_mass, p.tray_width_m,
                             min_half_width_m=p.target_swath_m)
-    metrics = _metrics(scene, chosen, reason, granules, departure, trays, landing, landed_mass, ci, rng)
+    metrics = _metrics(scene, chosen, reason, granules, departure, launch, trays, landing, landed_mass, ci, rng)
     metrics["wall_s"] = time.perf_counter() - started
     return SimulationResult(scene, granules, departure, launch, landing, trays, metrics)
 
@@ -119,7 +119,7 @@ def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
     }
 
 
-def _metrics(scene, model, reason, granules, departure, trays, landing, landed_mass, ci, rng) -> dict:
+def _metrics(scene, model, reason, granules, departure, launch, trays, landing, landed_mass, ci, rng) -> dict:
     p = scene.pattern
     released = float(granules.mass_kg.sum())
     landed = float(landed_mass.sum())
@@ -150,5 +150,5 @@ def _metrics(scene, model, reason, granules, departure, trays, landing, landed_m
         "cv_curve": {"bout_width_m": widths, "cv_percent": cvs},
         "trays": {"center_m": trays.center_m, "mass_kg": trays.mass_kg},
         "mass": {"released_kg": released, "landed_kg": landed, "retained_kg": retained},
-        "notes": list(departure.notes),
+        "notes": list(launch.notes),
     }

@@ -19,6 +19,7 @@ import pymunk.batch as batch
 
 from spreadgym.contacts import PlateContact
 from spreadgym.physics.departure import Departure
+from spreadgym.physics.pymunk_spinner import _crossing_fraction
 from spreadgym.physics.vertical import GRAVITY_M_S2
 from spreadgym.scene import Deflector
 
@@ -66,24 +67,38 @@ def deflect_pymunk(
     mass_kg: np.ndarray,
     rotation: str,
 ) -> Departure:
-    """Carry departed granules through the plate zone; return their states at its edge."""
+    """Carry departed granules through the plate zone; return their states at its edge.
+
+    Granules whose straight path to the zone edge passes no plate within reach are
+    moved there in closed form; only the others are stepped in pymunk.
+    """
     if not plates:
         return departure
-    moving = np.flatnonzero(departure.departed)
     zone = zone_radius_m(plates, float(radius_m.max()))
-    speed = departure.speed_m_s[moving]
-    dt = deflector_time_step(float(speed.max(initial=0.0)), float(radius_m.min()), plates)
-
     position = departure.position_m.copy()
     velocity = departure.velocity_m_s.copy()
     spin = departure.spin_rad_s.copy()
     elapsed = np.zeros(position.shape[0])
 
-    groups = [moving[k :: max(1, math.ceil(moving.size / GRANULES_PER_SPACE))] for k in
-              range(max(1, math.ceil(moving.size / GRANULES_PER_SPACE)))]
-    for group in groups:
-        if group.size:
-            _run_group(group, plates, contacts, radius_m, mass_kg, rotation, zone, dt,
+    gone = np.flatnonzero(departure.departed)
+    t_edge = advance_to_circle(position[gone], velocity[gone], zone)
+    end = position[gone] + t_edge[:, None] * velocity[gone]
+    near = np.zeros(gone.size, dtype=bool)
+    for plate in plates:
+        a, b = (np.asarray(p, dtype=float) for p in plate.endpoints())
+        reach = radius_m[gone] + 0.5 * plate.thickness_m + ZONE_MARGIN_M
+        near |= segment_distance(position[gone], end, a, b) <= reach
+    straight = gone[~near]
+    position[straight], elapsed[straight] = end[~near], t_edge[~near]
+
+    stepped = gone[near]
+    dt = 0.0
+    if stepped.size:
+        speed = np.hypot(velocity[stepped, 0], velocity[stepped, 1])
+        dt = deflector_time_step(float(speed.max()), float(radius_m[stepped].min()), plates)
+        n_spaces = math.ceil(stepped.size / GRANULES_PER_SPACE)
+        for k in range(n_spaces):
+            _run_group(stepped[k::n_spaces], plates, contacts, radius_m, mass_kg, rotation, zone, dt,
                        position, velocity, spin, elapsed)
 
     height = departure.height_m + departure.vertical_velocity_m_s * elapsed - 0.5 * GRAVITY_M_S2 * elapsed**2
@@ -97,8 +112,35 @@ def deflect_pymunk(
         outcome=departure.outcome,
         model=departure.model,
         dt_s=departure.dt_s,
-        notes=departure.notes + [f"deflectors: pymunk, step {dt:.3g} s, zone radius {zone:.3f} m"],
+        notes=departure.notes + [
+            f"deflectors: {stepped.size} granules stepped in pymunk (step {dt:.3g} s), "
+            f"{straight.size} passed no plate (closed form); zone radius {zone:.3f} m"
+        ],
+        tracks=departure.tracks,
     )
+
+
+def segment_distance(p0: np.ndarray, p1: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Shortest distance (N,) between segments p0[i]-p1[i] and the fixed segment a-b."""
+    d = p1 - p0
+    e = b - a
+
+    def point_to_segment(q, start, direction):
+        length2 = np.sum(direction * direction, axis=-1)
+        t = np.clip(np.sum((q - start) * direction, axis=-1) / np.maximum(length2, 1e-300), 0.0, 1.0)
+        return np.hypot(*(q - start - t[..., None] * direction).T)
+
+    ends = np.minimum(
+        np.minimum(point_to_segment(p0, a, e), point_to_segment(p1, a, e)),
+        np.minimum(point_to_segment(a, p0, d), point_to_segment(b, p0, d)),
+    )
+    cross = lambda u, v: u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]  # noqa: E731
+    denom = cross(d, e)
+    safe = np.where(np.abs(denom) > 1e-300, denom, 1.0)
+    s = cross(a - p0, e) / safe
+    t = cross(a - p0, d) / safe
+    crossing = (np.abs(denom) > 1e-300) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
+    return np.where(crossing, 0.0, ends)
 
 
 def _run_group(group, plates, contacts, radius_m, mass_kg, rotation, zone, dt,
@@ -112,7 +154,7 @@ def _run_group(group, plates, contacts, radius_m, mass_kg, rotation, zone, dt,
         shape.elasticity, shape.friction = contact.restitution, contact.friction
         space.add(shape)
     no_contact = pymunk.ShapeFilter(group=1)
-    index_of = {}
+    objects, ids = {}, []
     for i in group:
         m, r = float(mass_kg[i]), float(radius_m[i])
         body = pymunk.Body(m, math.inf if rotation == "locked" else 0.4 * m * r * r)
@@ -121,37 +163,36 @@ def _run_group(group, plates, contacts, radius_m, mass_kg, rotation, zone, dt,
         shape = pymunk.Circle(body, r)
         shape.elasticity, shape.friction, shape.filter = 1.0, 1.0, no_contact
         space.add(body, shape)
-        index_of[body.id] = (i, body, shape)
+        objects[body.id] = (body, shape)
+        ids.append(body.id)
+    ids = np.array(ids, dtype=np.uintp)
+    order = np.argsort(ids)
+    sorted_ids, sorted_group = ids[order], np.asarray(group)[order]
 
     buffer = batch.Buffer()
-    previous = {i: (position[i].copy(), velocity[i].copy(), spin[i]) for i in group}
+    inside = np.ones(position.shape[0], dtype=bool)
     for step in range(1, int(MAX_ZONE_TIME_S / dt) + 1):
         space.step(dt)
         buffer.clear()
         batch.get_space_bodies(space, _STATE, buffer)
-        ids = np.frombuffer(buffer.int_buf(), dtype=np.uintp)
+        row_ids = np.frombuffer(buffer.int_buf(), dtype=np.uintp)
         state = np.frombuffer(buffer.float_buf(), dtype=np.float64).reshape(-1, 5)
-        r_now = np.hypot(state[:, 0], state[:, 1])
-        for row in np.flatnonzero(r_now >= zone):
-            i, body, shape = index_of.pop(int(ids[row]))
-            p0, v0, w0 = previous[i]
-            p1, v1, w1 = state[row, 0:2], state[row, 2:4], state[row, 4]
-            f = _fraction(p0, p1, zone)
-            position[i], velocity[i] = p0 + f * (p1 - p0), v0 + f * (v1 - v0)
-            spin[i], elapsed[i] = w0 + f * (w1 - w0), (step - 1 + f) * dt
-            space.remove(body, shape)
-        if not index_of:
+        at = np.minimum(np.searchsorted(sorted_ids, row_ids), sorted_ids.size - 1)
+        granule_row = sorted_ids[at] == row_ids  # other rows: the space's own bodies
+        row_ids, state, rows = row_ids[granule_row], state[granule_row], sorted_group[at[granule_row]]
+        p1, v1, w1 = state[:, 0:2], state[:, 2:4], state[:, 4]
+        out = np.hypot(p1[:, 0], p1[:, 1]) >= zone
+        if out.any():
+            i = rows[out]
+            f = _crossing_fraction(position[i], p1[out], zone)
+            position[i] = position[i] + f[:, None] * (p1[out] - position[i])
+            velocity[i] = velocity[i] + f[:, None] * (v1[out] - velocity[i])
+            spin[i] = spin[i] + f * (w1[out] - spin[i])
+            elapsed[i] = (step - 1 + f) * dt
+            inside[i] = False
+            space.remove(*(o for body_id in row_ids[out] for o in objects.pop(int(body_id))))
+        keep = ~out
+        position[rows[keep]], velocity[rows[keep]], spin[rows[keep]] = p1[keep], v1[keep], w1[keep]
+        elapsed[rows[keep]] = step * dt
+        if not objects:
             return
-        for row, body_id in enumerate(ids):
-            entry = index_of.get(int(body_id))
-            if entry is not None:
-                previous[entry[0]] = (state[row, 0:2].copy(), state[row, 2:4].copy(), state[row, 4])
-    for i, _, _ in index_of.values():  # still inside after the time limit: leave as they are
-        position[i], velocity[i], spin[i] = previous[i]
-        elapsed[i] = MAX_ZONE_TIME_S
-
-
-def _fraction(p0, p1, radius) -> float:
-    d = p1 - p0
-    a, b, c = d @ d, 2.0 * (p0 @ d), p0 @ p0 - radius * radius
-    return float(np.clip((-b + math.sqrt(max(b * b - 4 * a * c, 0.0))) / max(2 * a, 1e-300), 0.0, 1.0))
