@@ -84,6 +84,7 @@ class _SpinnerSpace:
             self.shapes[body.id] = (body, shape)
         self.space = space
         self.buffer = batch.Buffer()
+        self._write_buffer = batch.Buffer()
         # Body ids (sorted) and their granule indices; the spinner maps to -1.
         ids = np.array([spinner.id] + list(self.shapes), dtype=np.uintp)
         order = np.argsort(ids)
@@ -100,9 +101,13 @@ class _SpinnerSpace:
 
     def write_forces(self, forces: np.ndarray) -> None:
         """Set the force of every row (rows in the order of the last read)."""
-        data = batch.Buffer()
-        data.set_float_buf(np.ascontiguousarray(forces, dtype=np.float64).ravel())
-        batch.set_space_bodies(self.space, batch.BodyFields.FORCE, data)
+        self._forces = np.ascontiguousarray(forces, dtype=np.float64).ravel()
+        self._write_buffer.set_float_buf(self._forces)
+        batch.set_space_bodies(self.space, batch.BodyFields.FORCE, self._write_buffer)
+
+    @property
+    def empty(self) -> bool:
+        return not self.shapes
 
     def set_below_vane_tops(self, body_ids: np.ndarray, below: np.ndarray) -> None:
         """Let granules that fell below the vane tops meet the vanes (and the reverse)."""
@@ -225,6 +230,7 @@ def simulate_pymunk(
             if gone.any():
                 space.remove(ids[gone])
         below_vane_tops = now_below
+        spaces = [space for space in spaces if not space.empty]
         for space in spaces:
             space.space.step(dt)
         if progress is not None:
