@@ -113,3 +113,46 @@ def flight_benchmark(counts=(2000, 20000), repeats: int = 5) -> list[dict]:
                                                        scene.flight), repeats)
         rows.append({"granules": n, "wall_s": wall, "granules_per_s": n / wall})
     return rows
+
+
+def cv_noise_benchmark(counts=(250, 500, 1000, 2000, 4000), seeds: int = 8, scene_name: str = "paper",
+                       model: str = "auto") -> list[dict]:
+    """Spread of the CV at the target swath over seeds, against the granule count.
+
+    The standard deviation over seeds is the standard error of one run's CV; the
+    mean shows the upward bias of a CV from few granules.
+    """
+    from spreadgym.pipeline import run_scene
+
+    rows = []
+    for n in counts:
+        cvs, walls = [], []
+        for seed in range(seeds):
+            result = run_scene(load_scene(scene_name, {"sim.granules": n, "sim.seed": seed}), model=model, ci=False)
+            cvs.append(result.metrics["cv_percent_at_target"])
+            walls.append(result.metrics["wall_s"])
+        cvs = np.array(cvs, dtype=float)
+        rows.append({"scene": scene_name, "granules": n, "seeds": seeds, "cv_mean_percent": float(cvs.mean()),
+                     "cv_standard_error_percent": float(cvs.std(ddof=1)), "wall_median_s": statistics.median(walls)})
+    return rows
+
+
+def plot_cv_noise(rows: list[dict], path) -> None:
+    """CV standard error and mean against granule count (log axis)."""
+    from matplotlib.figure import Figure
+
+    n = [r["granules"] for r in rows]
+    fig = Figure(figsize=(7, 4.5), dpi=100)
+    ax = fig.add_subplot()
+    ax.plot(n, [r["cv_standard_error_percent"] for r in rows], "o-", label="standard error of the CV (s.d. over seeds)")
+    ax.plot(n, [r["cv_mean_percent"] for r in rows], "s--", label="mean CV over seeds")
+    ref = rows[-1]["cv_standard_error_percent"] * (rows[-1]["granules"] / np.array(n)) ** 0.5
+    ax.plot(n, ref, ":", color="grey", label=r"$\propto 1/\sqrt{N}$")
+    ax.set_xscale("log")
+    ax.set_xlabel("granules per run")
+    ax.set_ylabel("CV at the target swath (%)")
+    ax.set_title(f"Sampling noise of the CV, {rows[0]['scene']} scene ({rows[0]['seeds']} seeds per point)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path)

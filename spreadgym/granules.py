@@ -4,9 +4,10 @@ A real spreader feeds continuously, so a granule meets the spinner at a random p
 Because the disc and its vanes are rotationally symmetric, a granule released when
 the spinner stands at angle `phase` is simulated with the spinner at angle 0 and
 the release point turned by `-phase`; its departure state is turned back by
-`+phase` (see `to_machine_frame`). Phases are stratified over one revolution (one
-granule per equal slice, uniform inside it), which lowers the sampling noise of the
-pattern without biasing it.
+`+phase`. Every random input (phase, diameter, the two feed offsets) is drawn as a
+Latin hypercube: each is stratified into N equal-probability slices with one granule
+per slice, the slices paired at random across inputs. That lowers the sampling noise
+of the pattern without biasing it (measured in `make bench`, section cv-noise).
 """
 
 from __future__ import annotations
@@ -57,13 +58,14 @@ def sample_granules(scene: Scene, fertilizer: Fertilizer, rng: np.random.Generat
     override d50 and sd; sd 0 gives one size). Mass: sphere of the particle density.
     """
     n = scene.sim.granules
+    u_phase, u_size, u_x, u_y = (_stratified(rng, n) for _ in range(4))
     size = fertilizer.size
     d50 = scene.granule.diameter_m if scene.granule.diameter_m is not None else size.d50_m
     sd = scene.granule.diameter_sd_m if scene.granule.diameter_sd_m is not None else size.sd_m
     lo, hi = min(size.min_m, d50), max(size.max_m, d50)
     diameter = np.full(n, d50)
     if sd > 0:
-        diameter = _truncated_normal(rng, d50, sd, lo, hi, n)
+        diameter = _truncated_normal(d50, sd, lo, hi, u_size)
     density = fertilizer.particle_density_kg_m3
     mass = density * math.pi / 6.0 * diameter**3
 
@@ -71,16 +73,21 @@ def sample_granules(scene: Scene, fertilizer: Fertilizer, rng: np.random.Generat
     base = np.array([feed.radius_m * math.cos(feed.angle_rad), feed.radius_m * math.sin(feed.angle_rad)])
     release = np.tile(base, (n, 1))
     if feed.spread_m > 0:
-        release = release + rng.normal(0.0, feed.spread_m, size=(n, 2))
+        release = release + feed.spread_m * np.column_stack([ndtri(u_x), ndtri(u_y)])
         release = _clip_inside(release, 0.95 * scene.vane_outer_radius_m)
-    phase = 2.0 * math.pi * (np.arange(n) + rng.random(n)) / n
+    phase = 2.0 * math.pi * u_phase
     return GranuleBatch(diameter, mass, density, release, phase)
 
 
-def _truncated_normal(rng, mean, sd, lo, hi, n) -> np.ndarray:
-    """Inverse-CDF sampling of a normal truncated to [lo, hi] (no rejection loop)."""
+def _stratified(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n uniforms in (0, 1), one in each slice [k/n, (k+1)/n), in random order."""
+    return (rng.permutation(n) + rng.random(n)) / n
+
+
+def _truncated_normal(mean, sd, lo, hi, uniform) -> np.ndarray:
+    """Inverse-CDF map of uniforms to a normal truncated to [lo, hi]."""
     a, b = ndtr((lo - mean) / sd), ndtr((hi - mean) / sd)
-    return mean + sd * ndtri(a + (b - a) * rng.random(n))
+    return mean + sd * ndtri(a + (b - a) * uniform)
 
 
 def _clip_inside(xy: np.ndarray, radius: float) -> np.ndarray:

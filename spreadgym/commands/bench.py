@@ -11,7 +11,7 @@ from spreadgym.report import format_table
 
 NAME = "bench"
 HELP = "run the benchmarks (speed, speed against accuracy) and write CSV/PNG under --out"
-SECTIONS = ("spinner", "flight")
+SECTIONS = ("spinner", "flight", "cv-noise")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,10 +39,14 @@ def run(args: argparse.Namespace) -> int:
     runners = {
         "spinner": lambda: benchmarks.spinner_benchmark(repeats=args.repeats),
         "flight": lambda: benchmarks.flight_benchmark(repeats=max(args.repeats, 5)),
+        "cv-noise": lambda: benchmarks.cv_noise_benchmark(),
     }
+    plots = {"cv-noise": benchmarks.plot_cv_noise}
     for name in sections:
         rows = runners[name]()
         write_csv(rows, args.out / f"{name}.csv")
+        if name in plots:
+            plots[name](rows, args.out / f"{name}.png")
         print(f"[{name}]")
         print(format_table([list(r.values()) for r in rows], list(rows[0])))
         print()
