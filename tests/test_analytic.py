@@ -231,7 +231,7 @@ def test_slow_disc_keeps_everything(prepare):
 
 
 def test_departure_contract(prepare):
-    scene = load_scene("paper", {"sim.granules": 50})
+    scene = load_scene("paper", {"sim.granules": 50, "feed.drop_height_m": 0.0})
     granules, contacts = prepare(scene)
     dep = simulate_analytic(scene, granules, contacts)
     assert dep.model == "analytic" and dep.dt_s == 0.0 and dep.notes
@@ -239,6 +239,21 @@ def test_departure_contract(prepare):
     np.testing.assert_array_equal(dep.height_m, 0.0)
     np.testing.assert_array_equal(dep.vertical_velocity_m_s, 0.0)
     assert any("first order" in note for note in dep.notes)
+
+
+def test_a_granule_that_leaves_before_landing_is_still_falling(prepare):
+    """High drop, fast disc: caught below the vane tops and thrown before it lands."""
+    scene = load_scene("paper", {"sim.granules": 50, "feed.drop_height_m": 0.6, "spinner.rpm": 1000,
+                                 "vanes.height_m": 0.5})
+    granules, contacts = prepare(scene)
+    dep = simulate_analytic(scene, granules, contacts)
+    t_land = math.sqrt(2 * 0.6 / G)
+    air = dep.time_s < t_land
+    assert air.any() and dep.departed.all()
+    np.testing.assert_allclose(dep.height_m[air], 0.6 - 0.5 * G * dep.time_s[air] ** 2)
+    np.testing.assert_allclose(dep.vertical_velocity_m_s[air], -G * dep.time_s[air])
+    assert np.all(dep.height_m[air] > 0) and np.all(dep.height_m[~air] == 0)
+    assert any("before landing" in note for note in dep.notes)
 
 
 def test_free_rotation_departs_faster_when_vane_friction_is_large(prepare):

@@ -42,15 +42,16 @@ def vane_vectors(k, count, r_in, pitch, omega):
     return p, u, n
 
 
-def reference_on_vane(omega, p, u, n, h, r, R, s_tip, mu_v, mu_d, rotation, s0, sd0, spin0=0.0,
-                      disc_friction_in_flight=False, t_max=5.0):
+def reference_on_vane(omega, p, u, n, h, r, R, s_tip, mu_v, mu_d_on_disc, rotation, s0, sd0, spin0=0.0,
+                      disc_friction_in_flight=False, t_max=5.0, disc_from=0.0):
     """Follow one granule on the leading face from (s0, s'0) until |c| = R.
 
     Rotating frame, vectors; `spin` is the inertial spin about z (0 when locked).
     Returns dict(outcome, t, c, v_rel, spin, hops, rolled), c and v_rel in the
     spinner frame at the final time; outcome "separated" when N reaches 0 in a
-    contact phase (not followed here).
+    contact phase (not followed here). disc_from: no disc friction before this time.
     """
+    mu_d = mu_d_on_disc if disc_from <= 0.0 else 0.0
     w2 = omega * omega
     locked = rotation == "locked"
     e_cp = _zx(-r * n)  # z x (contact point - centre)
@@ -157,8 +158,11 @@ def reference_on_vane(omega, p, u, n, h, r, R, s_tip, mu_v, mu_d, rotation, s0, 
             c, a0, N = contact(y[0], y[1], m_sign)
             return abs(stick_force(float(a0 @ u))) - mu_v * N
 
-        events = [ev_rim, ev_tip, ev_N, ev_rest, ev_slip, ev_limit]
-        for e, d in zip(events, (1, 1, -1, -m_sign, -eps if eps else 0, 1)):
+        def ev_land(t_local, _, t0=t, on=mu_d == mu_d_on_disc):
+            return -1.0 if on else t0 + t_local - disc_from
+
+        events = [ev_rim, ev_tip, ev_N, ev_rest, ev_slip, ev_limit, ev_land]
+        for e, d in zip(events, (1, 1, -1, -m_sign, -eps if eps else 0, 1, 1)):
             e.terminal, e.direction = True, d
         sol = solve_ivp(rhs, (0.0, t_max), [s, sd, spin], method="DOP853", rtol=RTOL, atol=ATOL,
                         events=events)
@@ -203,6 +207,11 @@ def reference_on_vane(omega, p, u, n, h, r, R, s_tip, mu_v, mu_d, rotation, s0, 
         if k == 5:
             c, a0, N = contact(s, sd)
             phase = ("slide", math.copysign(1.0, -stick_force(float(a0 @ u))))
+            continue
+        if k == 6:  # lands on the disc: disc friction from now on
+            mu_d = mu_d_on_disc
+            t = disc_from
+            phase = ("check",) if mode == "stick" else phase
             continue
     raise AssertionError("reference: too many phases")
 
@@ -422,3 +431,24 @@ def test_short_vane_leaves_at_the_tip_and_flies_straight():
     assert np.hypot(res.pos_u[0], res.pos_n[0]) == pytest.approx(case["R"], rel=1e-12)
     assert float(np.hypot(res.vel_u[0], res.vel_n[0])) == pytest.approx(departure_speed_ref(case, ref), rel=1e-9)
     assert res.t_s[0] == pytest.approx(ref["t"], rel=1e-9)
+
+
+@pytest.mark.parametrize("rotation", ["free", "locked"])
+@pytest.mark.parametrize("delay", [0.002, 0.01])
+def test_disc_friction_from_landing_like_the_reference(rotation, delay):
+    """A granule caught while still falling feels the disc only once it lands."""
+    case = vane_case(600, 0.0, 0.5, 0.5, 1.0, rotation, rho=0.045)
+    ref = reference_on_vane(case["omega"], case["p"], case["u"], case["n"], case["h"], case["r"], case["R"],
+                            case["s_tip"], case["mu_v"], case["mu_d"], rotation, case["s0"], case["sd0"],
+                            disc_from=delay)
+    res = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
+                            case["R"], case["mu_v"], case["mu_d"], case["r"], rotation=rotation,
+                            disc_contact_from_s=delay)
+    assert float(np.hypot(res.vel_u[0], res.vel_n[0])) == pytest.approx(departure_speed_ref(case, ref), rel=1e-9)
+    assert res.t_s[0] == pytest.approx(ref["t"], rel=1e-9)
+    never = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"],
+                              case["x_tip"], case["R"], case["mu_v"], 0.0, case["r"], rotation=rotation)
+    late = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
+                             case["R"], case["mu_v"], case["mu_d"], case["r"], rotation=rotation,
+                             disc_contact_from_s=10.0)
+    assert late.t_s[0] == never.t_s[0] and late.vel_u[0] == never.vel_u[0]

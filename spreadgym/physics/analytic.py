@@ -51,7 +51,7 @@ TWO_PI = 2.0 * math.pi
 
 ASSUMPTIONS = (
     "analytic: plan view, closed forms; no bounces (drop: fall time only, vertical speed lost at landing)",
-    "analytic: vanes can catch a falling granule once it is below the vane tops; disc drag starts at landing",
+    "analytic: vanes can catch a falling granule once it is below the vane tops; disc drag only once it has landed",
     "analytic: disc drag before the catch taken to first order (constant mu_d g along the disc motion)",
     "analytic: catch is perfectly plastic (normal relative velocity lost, along-vane kept, no spin)",
     "analytic: spin about the vertical axis only, sphere I = 2/5 m r^2; no drilling or rolling on the disc",
@@ -197,7 +197,7 @@ def simulate_analytic(
     contacts: Contacts,
     *,
     gravity_m_s2: float = GRAVITY_M_S2,
-    time_limit_s: float = 5.0,
+    time_limit_s: float = 3.0,
 ) -> Departure:
     """Departure states of `granules` by the closed-form model (see the module docstring)."""
     omega = scene.spinner.omega_rad_s
@@ -209,10 +209,13 @@ def simulate_analytic(
     geo = vane_geometry(scene, r)
     catch = catch_granules(scene, granules, contacts, gravity_m_s2)
     k = catch.vane
+    drop = scene.feed.drop_height_m
+    t_land = math.sqrt(2.0 * drop / gravity_m_s2)
     run = run_along_vane(
         Om, catch.x_m, catch.speed_along_m_s, catch.w_m, geo.p_u[k], geo.x_tip[k], scene.spinner.radius_m,
         contacts.vane_friction, contacts.disc_friction, r, rotation=rotation, kappa=KAPPA_SPHERE,
         g=gravity_m_s2, time_limit_s=np.maximum(time_limit_s - catch.time_s, 0.0),
+        disc_contact_from_s=np.maximum(t_land - catch.time_s, 0.0),
     )
     t = catch.time_s + run.t_s
     u, nn = geo.u[k], geo.n[k]
@@ -226,6 +229,10 @@ def simulate_analytic(
     else:
         spin = omega + sense * run.spin_offset / r
     outcome = run.outcome.astype(np.int8)
+    # still falling when it leaves (high drop, fast disc): height and vertical speed of the fall
+    airborne = t < t_land
+    height = np.where(airborne, drop - 0.5 * gravity_m_s2 * t * t, 0.0)
+    vz = np.where(airborne, -gravity_m_s2 * t, 0.0)
     notes = list(ASSUMPTIONS)
     notes.append(
         "analytic: departure at |c| = R = %.4g m; %d departed, %d stuck, %d timed out"
@@ -240,6 +247,8 @@ def simulate_analytic(
         "rolled on the face (no slip) for part of the way": int(np.sum(run.stick_time_s > 0)),
         "rolling broke into sliding": int(np.sum(run.stick_breaks > 0)),
         "left at the vane tip before reaching R": int(run.left_at_tip.sum()),
+        "were caught before landing (no disc drag until they land)": int(np.sum(catch.time_s < t_land)),
+        "left the disc before landing on it": int(np.sum(airborne & (outcome == DEPARTED))),
         "stopped at the inner end of the vane": int(run.stuck_at_hub.sum()),
     }
     for what, c in counts.items():
@@ -250,8 +259,8 @@ def simulate_analytic(
         position_m=pos,
         velocity_m_s=vel,
         spin_rad_s=spin,
-        height_m=np.zeros(n),
-        vertical_velocity_m_s=np.zeros(n),
+        height_m=height,
+        vertical_velocity_m_s=vz,
         time_s=t,
         outcome=outcome,
         model="analytic",

@@ -265,11 +265,13 @@ class LinearMotion:
 # --- first root of b0 + b1 t + g1 expm1(l1 t) + g2 expm1(l2 t) ------------------------------
 
 
-def solve_increasing(fun: Callable, lo, hi, f_lo=None, f_hi=None, max_iter: int = 100, rtol: float = 4e-16):
+def solve_increasing(fun: Callable, lo, hi, f_lo=None, f_hi=None, max_iter: int = 100, rtol: float = 1e-14,
+                     guess=None):
     """Root of increasing functions on brackets [lo, hi] (f(lo) < 0 <= f(hi)), element-wise.
 
     `fun(t, idx)` returns (f, f') at t for the elements `idx`. Newton steps that leave
-    the bracket are replaced by bisection, so it always converges.
+    the bracket are replaced by bisection, so it always converges. `guess`: optional
+    starting points (default: the secant through the bracket).
     """
     lo = np.array(lo, dtype=float, copy=True)
     hi = np.array(hi, dtype=float, copy=True)
@@ -283,6 +285,9 @@ def solve_increasing(fun: Callable, lo, hi, f_lo=None, f_hi=None, max_iter: int 
         frac = np.where(f_hi > f_lo, -f_lo / (f_hi - f_lo), 0.5)
     frac = np.clip(np.nan_to_num(frac, nan=0.5), 0.0, 1.0)
     t = lo + frac * (hi - lo)
+    if guess is not None:
+        g = np.asarray(guess, dtype=float)
+        t = np.where(np.isfinite(g) & (g > lo) & (g < hi), g, t)
     active = idx_all[hi > lo]
     for _ in range(max_iter):
         if active.size == 0:
@@ -294,12 +299,14 @@ def solve_increasing(fun: Callable, lo, hi, f_lo=None, f_hi=None, max_iter: int 
         hi[active] = np.where(neg, hi[active], ta)
         la, ha = lo[active], hi[active]
         with np.errstate(divide="ignore", invalid="ignore"):
-            tn = ta - f / fp
+            step = f / fp
+        tol = rtol * np.maximum(np.abs(ta), 1e-300)
+        # converged: the Newton step is below the tolerance (or the bracket is)
+        done = (f == 0.0) | ((fp > 0) & (np.abs(step) <= tol)) | (ha - la <= tol)
+        tn = ta - step
         bad = ~np.isfinite(tn) | (tn <= la) | (tn >= ha) | (fp <= 0)
         tn = np.where(bad, 0.5 * (la + ha), tn)
-        tol = rtol * np.maximum(np.abs(tn), 1e-300)
-        done = (np.abs(tn - ta) <= tol) | (ha - la <= tol) | (f == 0.0)
-        t[active] = np.where(f == 0.0, ta, tn)
+        t[active] = np.where(done, np.where((f == 0.0) | (ha - la > tol), ta, np.where(f < 0, ha, ta)), tn)
         active = active[~done]
     return t
 
@@ -317,14 +324,30 @@ class EventFunction:
 
     def __call__(self, t, idx=slice(None)):
         l1, l2 = self.l1[idx], self.l2[idx]
-        e1 = np.exp(np.minimum(l1 * t, _EXP_MAX))
-        e2 = np.exp(np.minimum(l2 * t, _EXP_MAX))
         m1 = np.expm1(np.minimum(l1 * t, _EXP_MAX))
         m2 = np.expm1(np.minimum(l2 * t, _EXP_MAX))
-        g1, g2 = self.g1[idx], self.g2[idx]
-        f = self.F0[idx] + self.b1[idx] * t + g1 * m1 + g2 * m2
-        fp = self.b1[idx] + g1 * l1 * e1 + g2 * l2 * e2
+        g1, g2, b1 = self.g1[idx], self.g2[idx], self.b1[idx]
+        f = self.F0[idx] + b1 * t + g1 * m1 + g2 * m2
+        fp = b1 + g1 * l1 * (m1 + 1.0) + g2 * l2 * (m2 + 1.0)
         return f, fp
+
+    def take(self, sel) -> "EventFunction":
+        """The event function of the elements `sel` only."""
+        return EventFunction(self.F0[sel], self.b1[sel], self.g1[sel], self.g2[sel], self.l1[sel], self.l2[sel])
+
+    def _guess(self, lo, hi, idx):
+        """Start for Newton: the growing exponential solved with the rest frozen."""
+        F0, b1, g1, g2 = self.F0[idx], self.b1[idx], self.g1[idx], self.g2[idx]
+        l1, l2 = self.l1[idx], self.l2[idx]
+        grow = (g1 > 0) & (l1 > 0)
+        g1s = np.where(grow, g1, 1.0)
+        l1s = np.where(grow, l1, 1.0)
+        t = lo.copy()
+        for _ in range(3):
+            arg = (-F0 - b1 * t - g2 * np.expm1(np.minimum(l2 * t, _EXP_MAX))) / g1s
+            t = np.log1p(np.maximum(arg, -1.0 + 1e-16)) / l1s
+            t = np.clip(t, lo, hi)
+        return np.where(grow, t, np.nan)
 
     def derivative(self, t, idx=slice(None)):
         l1, l2 = self.l1[idx], self.l2[idx]
@@ -410,14 +433,12 @@ class EventFunction:
             def fun(t, i):
                 return self(t, need[i])
 
-            result[need] = solve_increasing(fun, lo, hi, flo, fhi)
+            result[need] = solve_increasing(fun, lo, hi, flo, fhi, guess=self._guess(lo, hi, need))
         return result
 
 
 # --- one vane: the phase machine -------------------------------------------------------------
 
-# events
-_EV_NONE, _EV_XEND, _EV_XIN, _EV_REST, _EV_N0, _EV_SLIP0, _EV_LIMIT_P, _EV_LIMIT_M, _EV_TIME = range(9)
 # pending actions between phases
 _CLASSIFY, _CONTACT, _STATIC, _STICKCHECK, _FLIGHT, _TIPFLIGHT, _DONE = range(7)
 
@@ -466,8 +487,9 @@ def run_along_vane(
     spin_offset0=None,
     kappa: float = KAPPA_SPHERE,
     g: float = GRAVITY_M_S2,
-    time_limit_s=5.0,
+    time_limit_s=3.0,
     max_rounds: int = 200,
+    disc_contact_from_s=0.0,
 ) -> VaneRun:
     """Follow granules caught on a vane's leading face until they leave the disc.
 
@@ -477,15 +499,21 @@ def run_along_vane(
     face; disc_radius: departure when |c| = R; rotation "free" or "locked";
     spin_offset0: Phi at the catch (default -r Omega: no spin in the machine frame).
     time_limit_s: per-granule time budget from the catch.
+    disc_contact_from_s: time after the catch from which the granule lies on the disc
+    (a granule caught while still falling below the vane tops feels no disc friction
+    before it lands); default 0.
     """
     if rotation not in ("free", "locked"):
         raise ValueError(f"rotation must be 'free' or 'locked', got {rotation!r}")
     arrays = np.broadcast_arrays(
         *(np.asarray(a, dtype=float) for a in (omega_abs, x0, v0, w, x_in, x_tip, disc_radius, mu_v, mu_d,
-                                              granule_radius, time_limit_s))
+                                              granule_radius, time_limit_s, disc_contact_from_s))
     )
     n = arrays[0].shape[0] if arrays[0].ndim else 1
-    Om, x, v, w, x_in, x_tip, R, mu_v, mu_d, r, tlim = (np.array(np.atleast_1d(a), dtype=float) for a in arrays)
+    Om, x, v, w, x_in, x_tip, R, mu_v, mu_full, r, tlim, t_on = (
+        np.array(np.atleast_1d(a), dtype=float) for a in arrays
+    )
+    mu_d = np.where(t_on <= 0.0, mu_full, 0.0)  # disc friction in force now
     locked = rotation == "locked"
     q = 1.0 if locked else kappa / (1.0 + kappa)  # |f| = q |G| while sticking
     Phi = -r * Om if spin_offset0 is None else np.array(np.broadcast_to(spin_offset0, (n,)), dtype=float)
@@ -531,6 +559,7 @@ def run_along_vane(
         live = action != _DONE
         if not np.any(live):
             break
+        mu_d[:] = np.where(t >= t_on, mu_full, 0.0)
         # ---- value-based classification (after a catch, a re-catch) ----
         idx = np.nonzero(action == _CLASSIFY)[0]
         if idx.size:
@@ -615,7 +644,7 @@ def run_along_vane(
             continue
         _contact_round(
             idx, Om, x, v, w, x_in, x_end, Phi, t, tlim, sgn_m, sgn_e, stick, action, mu_v, mu_d, r,
-            locked, kappa, q, g, t_eps, stick_time, min_N, tip_first, x_R, hub, seps, finish, stuck, breaks,
+            locked, kappa, q, g, t_eps, stick_time, min_N, tip_first, x_R, hub, seps, finish, stuck, breaks, t_on,
         )
     left = action != _DONE
     if np.any(left):
@@ -629,7 +658,8 @@ def run_along_vane(
 
 
 def _contact_round(idx, Om, x, v, w, x_in, x_end, Phi, t, tlim, sgn_m, sgn_e, stick, action, mu_v, mu_d, r,
-                   locked, kappa, q, g, t_eps, stick_time, min_N, tip_first, x_R, hub, seps, finish, stuck, breaks):
+                   locked, kappa, q, g, t_eps, stick_time, min_N, tip_first, x_R, hub, seps, finish, stuck, breaks,
+                   t_on):
     """Advance every granule of `idx` (in contact) to the end of its current phase."""
     om, xx, vv, ww = Om[idx], x[idx], v[idx], w[idx]
     sm, se, st = sgn_m[idx], sgn_e[idx], stick[idx]
@@ -652,16 +682,21 @@ def _contact_round(idx, Om, x, v, w, x_in, x_end, Phi, t, tlim, sgn_m, sgn_e, st
     T = np.minimum(np.minimum(t_rem, t_bound), t_rest * (1.0 + 1e-12))
     tmin = np.minimum(t_eps[idx], T)
     N0 = normal_force(om, vv, ww)
-    cand = np.full((idx.size, 8), np.inf)
+    cand = np.full((idx.size, 9), np.inf)
+
+    def put(col, ev, sel):
+        sel = np.nonzero(sel)[0]
+        if sel.size:
+            cand[sel, col] = ev.take(sel).first_root(T[sel], tmin[sel])
+
     # 0: rim / tip (outwards) ; 1: inner end (inwards)
     out = sm > 0
-    cand[:, 0] = np.where(out, mot.event(xx - x_end[idx], 0.0, 1.0, 0.0).first_root(T, tmin), np.inf)
-    cand[:, 1] = np.where(~out, mot.event(x_in[idx] - xx, 0.0, -1.0, 0.0).first_root(T, tmin), np.inf)
+    put(0, mot.event(xx - x_end[idx], 0.0, 1.0, 0.0), out)
+    put(1, mot.event(x_in[idx] - xx, 0.0, -1.0, 0.0), ~out)
     # 2: x' = 0 (exact)
     cand[:, 2] = t_rest
     # 3: N = 0  (F = -N)
-    cand[:, 3] = mot.event(np.minimum(-N0, 0.0), 0.0, 0.0, -2.0 * om).first_root(T, tmin)
-    sl = ~st
+    put(3, mot.event(np.minimum(-N0, 0.0), 0.0, 0.0, -2.0 * om), np.ones(idx.size, dtype=bool))
     if locked:
         slip0 = vv - r[idx] * om
         # 4: slip = 0 while sliding, F = -eps (x' - r Omega)
@@ -670,13 +705,15 @@ def _contact_round(idx, Om, x, v, w, x_in, x_end, Phi, t, tlim, sgn_m, sgn_e, st
         slip0 = vv + Phi[idx]
         # slip(t) = slip0 + dv - (2 Omega eps mu / kappa) dx + (eps mu Omega^2 w / kappa) t
         ev = mot.event(-se * slip0, -mv * om * om * ww / kappa, 2.0 * om * mv / kappa, -se)
-    cand[:, 4] = np.where(sl, ev.first_root(T, tmin), np.inf)
+    put(4, ev, ~st)
     # 5, 6: friction limit while sticking: +-q G - mu N = 0
     G0 = om * om * xx - sm * md * g
     for col, s in ((5, 1.0), (6, -1.0)):
-        evl = mot.event(s * q * G0 - mv * N0, 0.0, s * q * om * om, -2.0 * om * mv)
-        cand[:, col] = np.where(st, evl.first_root(T, tmin), np.inf)
+        put(col, mot.event(s * q * G0 - mv * N0, 0.0, s * q * om * om, -2.0 * om * mv), st)
     cand[:, 7] = np.where(T >= t_rem, t_rem, np.inf)  # time limit
+    # 8: the granule lands on the disc (disc friction starts)
+    to_land = t_on[idx] - t[idx]
+    cand[:, 8] = np.where((to_land > 0.0) & (to_land <= T), to_land, np.inf)
     which = np.argmin(cand, axis=1)
     tau = cand[np.arange(idx.size), which]
     none = ~np.isfinite(tau)
@@ -736,6 +773,9 @@ def _contact_round(idx, Om, x, v, w, x_in, x_end, Phi, t, tlim, sgn_m, sgn_e, st
     action[i] = _CONTACT
     i = idx[e == 7]
     finish(i, RETAINED_TIMEOUT)
+    i = idx[e == 8]  # landed: same motion, now with disc friction; re-check a no-slip phase
+    t[i] = t_on[i]
+    action[i] = np.where(stick[i], _STICKCHECK, _CONTACT)
 
 
 def _theta_terms(theta):
@@ -752,7 +792,7 @@ def _theta_terms(theta):
     return c1, c2, c3
 
 
-def _flight(Om, x0, v0, w, R, x_in, x_tip, recatch=True, n_scan=96):
+def _flight(Om, x0, v0, w, R, x_in, x_tip, recatch=True, n_scan=40):
     """Straight flight (machine frame) from the face line at (x0, w) with x' = v0.
 
     Returns the exit at |c| = R or the first re-catch by the same face, whichever
@@ -791,13 +831,15 @@ def _flight(Om, x0, v0, w, R, x_in, x_tip, recatch=True, n_scan=96):
         if need.size:
             lo = scan[need, first[need] - 1]
             hi = scan[need, first[need]]
-            for _ in range(80):  # bisection on g (sign change bracketed)
-                mid = 0.5 * (lo + hi)
-                gm = g_of(mid, need)
-                pos = gm > 0.0
-                lo = np.where(pos, mid, lo)
-                hi = np.where(pos, hi, mid)
-            th_catch[need] = hi
+
+            def minus_d(th, i):  # -d(theta) and its derivative: increasing through the re-catch
+                j = need[i]
+                s_, c_ = np.sin(th), np.cos(th)
+                d = w[j] * (c_ - 1.0) + x0[j] * (th * c_ - s_) - k[j] * th * s_
+                dd = -w[j] * s_ - x0[j] * th * s_ - k[j] * (s_ + th * c_)
+                return -d, -dd
+
+            th_catch[need] = solve_increasing(minus_d, lo, hi)
     th = np.where(np.isfinite(th_catch), th_catch, th_exit)
     c, s = np.cos(th), np.sin(th)
     t = th / Om
