@@ -299,6 +299,23 @@ def test_sliding_closed_form_solves_the_sliding_equation(mu_v, mu_d, w):
     np.testing.assert_allclose(vs.normal_force(om, mot.v(t), w), 2 * om * sol.y[1] - om * om * w, rtol=1e-9)
 
 
+def test_slide_and_roll_motion_in_distance_along_the_vane():
+    om, pu, w = 60.0, 0.025, 0.004
+    mot = vs.slide_motion(om, 0.4, 0.3, pu, w, 0.02, 0.3)
+    t = mot.time_to_reach(0.1 + pu)
+    assert mot.x(t) - pu == pytest.approx(0.1, rel=1e-13)
+
+    def rhs(_, y):  # the brief's form, in s
+        return [y[1], -2 * 0.4 * om * y[1] + om * om * y[0] + om * om * pu - 0.3 * G + 0.4 * om * om * w]
+
+    sol = solve_ivp(rhs, (0, t), [0.02, 0.3], method="DOP853", rtol=RTOL, atol=ATOL)
+    assert sol.y[0, -1] == pytest.approx(0.1, rel=1e-9)
+    roll = vs.roll_motion(om, 0.3, pu, 0.02, 0.3)
+    # (1 + 2/5) s'' = W^2 (s + p.u) - mu_d g
+    tt = np.array([0.0, 0.01, 0.02])
+    np.testing.assert_allclose(1.4 * roll.acceleration(tt), om * om * roll.x(tt) - 0.3 * G, rtol=1e-12)
+
+
 def test_time_to_reach_inverts_the_closed_form():
     om = np.array([30.0, 80.0, 115.0, 50.0])
     A, B, C = vs.slide_coefficients(om, np.array([0.0, 0.3, 0.6, 0.1]), np.array([0.0, 0.5, 0.2, 0.6]), 0.004)

@@ -46,7 +46,8 @@ Phases (each a linear ODE with constant coefficients, so each has a closed form)
 
 Events end a phase: the centre reaches the rim (|c| = R) or the contact point the vane
 tip, x' = 0 (exact: ratio of exponentials), N = 0, slip = 0, the friction limit while
-sticking, the inner end of the vane while moving inwards. Each event function has the
+sticking, the inner end of the vane while moving inwards, landing on the disc (a
+granule caught while still falling has no disc friction before that). Each event function has the
 form  b0 + b1 t + g1 expm1(l1 t) + g2 expm1(l2 t); its first root is found exactly up
 to rounding: the zeros of the derivative split it into monotone pieces (closed form
 when b1 = 0, otherwise a bracketed solve on the monotone pieces of the derivative),
@@ -134,6 +135,22 @@ def stick_coefficients(omega_abs, mu_d, motion_sign=1.0, kappa=KAPPA_SPHERE, g=G
     B = np.broadcast_to(om * om * scale, shape).copy()
     C = np.broadcast_to(-motion_sign * np.asarray(mu_d, dtype=float) * g * scale, shape).copy()
     return A, B, C
+
+
+def slide_motion(omega_abs, mu_v, mu_d, p_u, w, s0, sd0, slip_sign=1.0, motion_sign=1.0, g=GRAVITY_M_S2):
+    """Sliding along the vane from s0 (distance from the inner end) with s' = sd0.
+
+    Returns a LinearMotion in x = s + p.u: s(t) = motion.x(t) - p_u, s'(t) = motion.v(t),
+    time to reach s: motion.time_to_reach(s + p_u); normal force: normal_force(Omega, s', w).
+    """
+    A, B, C = slide_coefficients(omega_abs, mu_v, mu_d, w, slip_sign, motion_sign, g)
+    return LinearMotion.solve(A, B, C, np.asarray(s0, dtype=float) + p_u, sd0)
+
+
+def roll_motion(omega_abs, mu_d, p_u, s0, sd0, motion_sign=1.0, kappa=KAPPA_SPHERE, g=GRAVITY_M_S2):
+    """Rolling without slip along the face (free sphere); LinearMotion in x = s + p.u."""
+    A, B, C = stick_coefficients(omega_abs, mu_d, motion_sign, kappa, g)
+    return LinearMotion.solve(A, B, C, np.asarray(s0, dtype=float) + p_u, sd0)
 
 
 @dataclass(frozen=True)
@@ -405,6 +422,12 @@ class EventFunction:
 
         inf where F stays negative on the interval.
         """
+        if self.F0.ndim != 1:  # scalars and other shapes: solve flat, give the shape back
+            arrays = np.broadcast_arrays(self.F0, self.b1, self.g1, self.g2, self.l1, self.l2,
+                                         np.asarray(horizon, dtype=float), np.asarray(t_min, dtype=float))
+            shape = arrays[0].shape
+            flat = EventFunction(*(np.ravel(a).astype(float) for a in arrays[:6]))
+            return flat.first_root(np.ravel(arrays[6]), np.ravel(arrays[7])).reshape(shape)
         n = self.F0.shape[0]
         T = np.broadcast_to(np.asarray(horizon, dtype=float), (n,)).copy()
         tmin = np.broadcast_to(np.asarray(t_min, dtype=float), (n,)).copy()
