@@ -1,0 +1,251 @@
+"""Environment configs: `configs/envs/<name>.yaml`, validated, with `gym.make` kwargs on top.
+
+Every key of the YAML can be overridden by a keyword argument of `gym.make` (or of
+the env class):
+
+* a top-level key replaces the value (`granules=100`, `model="pymunk"`);
+* a section (`context`, `settings`, `reward`, `fallback_restitution`, `render`,
+  `observation`) given as a dict is merged key by key into the YAML's section
+  (`reward={"cv_weight": 2.0}` keeps the other reward weights);
+* a dotted key sets one nested value (`**{"reward.cv_weight": 2.0}`);
+* `config="path/to/file.yaml"` (or a shipped name) replaces the YAML the rest is
+  applied to.
+
+A key the schema does not know is an error (`ConfigError`) naming it, as is any
+value out of range. The checks that need the scene or the material library (known
+fertilizers and surfaces, a target range on the tray grid, model name) are made by
+the environment when it is built (see `spreadgym.envs.spinner_design.Task`).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any, Literal, Mapping, Optional
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from spreadgym.errors import ConfigError
+from spreadgym.resources import read_yaml, resolve_named
+
+DESIGN = "spinner_design"
+TUNING = "spreader_tuning"
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _check_range(value: tuple[float, float], lo: float, hi: float, unit: str) -> tuple[float, float]:
+    a, b = float(value[0]), float(value[1])
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise ValueError(f"both ends must be finite, got [{a}, {b}]")
+    if a > b:
+        raise ValueError(f"lower end {a} is above the upper end {b}")
+    if a < lo or b > hi:
+        raise ValueError(f"[{a}, {b}] must lie within [{lo}, {hi}] {unit}")
+    return a, b
+
+
+class ContextConfig(_Strict):
+    """What `reset` samples (uniformly) with the env's `np_random`."""
+
+    fertilizers: list[str] = Field(min_length=1, description="library names, one drawn per episode")
+    spinner_materials: list[str] = Field(min_length=1, description="library surfaces, one drawn per episode")
+    target_swath_m: tuple[float, float] = Field(description="range; the draw is a multiple of the tray width")
+    forward_speed_m_s: tuple[float, float] = (0.0, 0.0)
+    wind_x_m_s: tuple[float, float] = (0.0, 0.0)
+    wind_y_m_s: tuple[float, float] = (0.0, 0.0)
+
+    @field_validator("target_swath_m")
+    @classmethod
+    def _swath(cls, v):
+        a, b = _check_range(v, 0.0, 100.0, "m")
+        if a <= 0:
+            raise ValueError(f"the lower end must be > 0, got {a}")
+        return a, b
+
+    @field_validator("forward_speed_m_s")
+    @classmethod
+    def _speed(cls, v):
+        return _check_range(v, 0.0, 20.0, "m/s")
+
+    @field_validator("wind_x_m_s", "wind_y_m_s")
+    @classmethod
+    def _wind(cls, v):
+        return _check_range(v, -30.0, 30.0, "m/s")
+
+
+class SettingsConfig(_Strict):
+    """Ranges of the settings the action chooses (action -1 maps to the lower end)."""
+
+    rpm: tuple[float, float] = (200.0, 1100.0)
+    pitch_deg: tuple[float, float] = (-30.0, 30.0)
+    pitch_per_vane: bool = Field(default=False, description="one pitch per vane instead of a shared one")
+    deflectors: bool = Field(default=True, description="adjustable deflectors (angle_range_deg) are actions")
+
+    @field_validator("rpm")
+    @classmethod
+    def _rpm(cls, v):
+        a, b = _check_range(v, 0.0, 5000.0, "rpm")
+        if a <= 0:
+            raise ValueError(f"the lower end must be > 0, got {a}")
+        return a, b
+
+    @field_validator("pitch_deg")
+    @classmethod
+    def _pitch(cls, v):
+        return _check_range(v, -60.0, 60.0, "deg")
+
+
+class RewardConfig(_Strict):
+    """Weights of the penalty terms (see docs/environments.md)."""
+
+    cv_weight: float = Field(default=1.0, ge=0.0, le=1e3)
+    swath_weight: float = Field(default=0.5, ge=0.0, le=1e3)
+    retained_weight: float = Field(default=1.0, ge=0.0, le=1e3)
+    cv_worst_percent: float = Field(default=100.0, gt=0.0, le=1e4, description="CV that scores as worst")
+
+
+class TuningRewardConfig(RewardConfig):
+    step_cost: float = Field(default=0.05, ge=0.0, le=1e3, description="subtracted every step")
+    goal_bonus: float = Field(default=1.0, ge=0.0, le=1e3, description="added on the step that reaches the goal")
+
+
+class FallbackRestitution(_Strict):
+    """Restitution used only for pairs the library did not measure (and the scene does not set)."""
+
+    disc: float = Field(default=0.43, ge=0.0, le=1.0)
+    vane: float = Field(default=0.43, ge=0.0, le=1.0)
+    deflector: float = Field(default=0.43, ge=0.0, le=1.0)
+
+
+class RenderConfig(_Strict):
+    width_px: int = Field(default=640, ge=64, le=4096)
+    height_px: int = Field(default=640, ge=64, le=4096)
+    trajectories: int = Field(default=150, ge=0, le=100_000, description="granule flights drawn (field view)")
+    disc_tracks: int = Field(
+        default=10, ge=0, le=1000, description="granule paths over the disc recorded for the picture (render modes only)"
+    )
+
+
+class ObservationConfig(_Strict):
+    """The measured pattern in the tuning env's observation."""
+
+    single_pass_bins: int = Field(default=40, ge=1, le=1000)
+    single_pass_half_width_m: float = Field(default=10.0, gt=0.0, le=200.0)
+    bout_bins: int = Field(default=16, ge=1, le=1000)
+
+
+class DesignConfig(_Strict):
+    scene: str = Field(default="paper", description="shipped scene name or YAML path")
+    scene_overrides: dict[str, Any] = Field(default_factory=dict, description="dotted scene keys")
+    model: str = Field(default="analytic", description="spinner model (see spreadgym.physics.selection)")
+    granules: int = Field(default=2000, ge=1, le=1_000_000, description="granules per simulation")
+    confidence_interval: bool = Field(default=False, description="bootstrap CI of the CV in info (slower)")
+    fallback_restitution: FallbackRestitution = FallbackRestitution()
+    context: ContextConfig
+    settings: SettingsConfig = SettingsConfig()
+    reward: RewardConfig = RewardConfig()
+    render: RenderConfig = RenderConfig()
+
+
+class TuningConfig(DesignConfig):
+    reward: TuningRewardConfig = TuningRewardConfig()
+    max_steps: int = Field(default=20, ge=1, le=100_000, description="truncation after this many steps")
+    goal_cv_percent: float = Field(default=15.0, gt=0.0, le=1e4, description="terminate at or below")
+    max_change: float = Field(
+        default=0.25, gt=0.0, le=2.0,
+        description="largest change per step, in normalised setting units (the full range is 2)",
+    )
+    initial_settings: Literal["random", "middle", "scene"] = Field(
+        default="random", description="settings of the first tray test of an episode"
+    )
+    observation: ObservationConfig = ObservationConfig()
+
+
+SCHEMAS: dict[str, type[DesignConfig]] = {DESIGN: DesignConfig, TUNING: TuningConfig}
+
+
+def _format(exc: ValidationError) -> ConfigError:
+    first = exc.errors()[0]
+    key = ".".join(str(p) for p in first["loc"]) or "config"
+    message = first["msg"].removeprefix("Value error, ")
+    if first["type"] == "extra_forbidden":
+        message = "unknown key"
+    elif first["type"] != "value_error":
+        message += f" (got {first.get('input')!r})"
+    return ConfigError(key, message)
+
+
+def _validate(schema: type[DesignConfig], raw: Mapping[str, Any]) -> DesignConfig:
+    try:
+        return schema.model_validate(dict(raw))
+    except ValidationError as exc:
+        raise _format(exc) from None
+
+
+def _sections(schema: type[BaseModel]) -> set[str]:
+    """Top-level keys whose value is a sub-model (merged rather than replaced)."""
+    out = set()
+    for name, field in schema.model_fields.items():
+        ann = field.annotation
+        if isinstance(ann, type) and issubclass(ann, BaseModel):
+            out.add(name)
+    return out
+
+
+def _set_dotted(tree: dict, dotted: str, value: Any, schema: type[BaseModel]) -> None:
+    parts = dotted.split(".")
+    node: Any = tree
+    model: Optional[type[BaseModel]] = schema
+    for depth, part in enumerate(parts):
+        where = ".".join(parts[: depth + 1])
+        fields = model.model_fields if model is not None else None
+        if fields is not None and part not in fields:
+            raise ConfigError(where, f"unknown key; known keys here: {', '.join(sorted(fields))}")
+        if depth == len(parts) - 1:
+            node[part] = value
+            return
+        if fields is None:  # a free mapping (scene_overrides): the rest is one key
+            node[".".join(parts[depth:])] = value
+            return
+        if not isinstance(node.get(part), dict):
+            raise ConfigError(where, "is not a section; set it as a whole")
+        node = node[part]
+        ann = fields[part].annotation if fields is not None else None
+        model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
+
+
+def load_env_config(name: str, overrides: Optional[Mapping[str, Any]] = None) -> DesignConfig:
+    """Validated config of env `name` (`spinner_design` or `spreader_tuning`) with overrides."""
+    if name not in SCHEMAS:
+        raise ConfigError("env", f"unknown env config {name!r}; known: {', '.join(SCHEMAS)}")
+    schema = SCHEMAS[name]
+    overrides = dict(overrides or {})
+    source = overrides.pop("config", name)
+    if not isinstance(source, str):
+        raise ConfigError("config", f"expected a config name or YAML path, got {source!r}")
+    raw = read_yaml(resolve_named("envs", source))
+    if not isinstance(raw, dict):
+        raise ConfigError("config", f"{source!r} does not hold a mapping")
+    # Validate the file alone first, so its own errors are reported as such, then work
+    # on the full dump (defaults included) so any key can be overridden.
+    tree = _validate(schema, raw).model_dump(mode="python")
+    tree = copy.deepcopy(tree)
+    sections = _sections(schema)
+    known = set(schema.model_fields) | {"config"}
+    for key, value in overrides.items():
+        if not isinstance(key, str):
+            raise ConfigError(str(key), "keys must be strings")
+        if "." in key:
+            _set_dotted(tree, key, value, schema)
+            continue
+        if key not in known:
+            raise ConfigError(key, f"unknown key; known keys: {', '.join(sorted(known))}")
+        if key in sections and isinstance(value, Mapping):
+            for sub_key, sub_value in value.items():
+                _set_dotted(tree, f"{key}.{sub_key}", sub_value, schema)
+        else:
+            tree[key] = value
+    return _validate(schema, tree)

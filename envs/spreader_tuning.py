@@ -1,0 +1,218 @@
+"""`spreadgym/SpreaderTuning-v0`: calibrate a spreader the way a tray test does, over several steps.
+
+`reset` draws a job (as in SpinnerDesign), sets the initial settings (config
+`initial_settings`) and runs a first tray test. Each `step` changes the settings by
+`max_change * action` in normalised units (the full range of a setting is 2) and runs
+another tray test with a fresh granule sample, so the measured pattern is noisy like a
+real one. The episode is `terminated` when the measured CV at the target swath is at
+or below `goal_cv_percent`, `truncated` after `max_steps` steps.
+
+Observation (float32, every entry in [-1, 1]), in this order:
+    context                  as SpinnerDesign (C entries)
+    settings                 current settings, normalised to [-1, 1] (A entries, action order)
+    cv                       min(CV, cv_worst) / cv_worst, measured at the target (1 if nothing landed)
+    swath                    min(W_eff / W_target, 2) / 2
+    landed                   landed mass / released mass
+    steps_left               (max_steps - steps taken) / max_steps
+    single pass              `single_pass_bins` bins over +-`single_pass_half_width_m`: the
+                             tray masses re-binned (mass beyond the window goes to the edge
+                             bins), divided by the largest bin (0 if nothing landed)
+    bout                     `bout_bins` bins over one bout at the target swath: the
+                             overlapped tray masses re-binned, divided by their mean and by
+                             2, clipped to [0, 1] (0.5 = the mean)
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any, Optional
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from spreadgym import pattern
+from spreadgym.envs import reward as rewards
+from spreadgym.envs.actions import check_action
+from spreadgym.envs.config import TUNING, load_env_config
+from spreadgym.envs.render import HumanViewer, draw_frame
+from spreadgym.envs.spinner_design import SEED_BOUND, Context, Task, frame_lines, info_metrics
+from spreadgym.errors import ConfigError
+from spreadgym.scene import Scene
+
+SUMMARY_NAMES = ["cv", "swath", "landed", "steps_left"]
+
+
+def rebin(edges: np.ndarray, mass: np.ndarray, new_edges: np.ndarray) -> np.ndarray:
+    """Mass per new bin, spreading each old bin's mass uniformly over it.
+
+    The first and last new bins also collect whatever lies beyond them, so the total
+    is kept."""
+    cumulative = np.concatenate([[0.0], np.cumsum(mass)])
+    at = np.interp(new_edges, edges, cumulative)
+    at[0], at[-1] = 0.0, cumulative[-1]
+    return np.maximum(np.diff(at), 0.0)
+
+
+def single_pass_features(trays: pattern.Trays, half_width_m: float, bins: int) -> np.ndarray:
+    """Single-pass tray masses on a fixed grid, divided by the largest bin."""
+    w = trays.width_m
+    edges = np.append(trays.center_m - 0.5 * w, trays.center_m[-1] + 0.5 * w)
+    masses = rebin(edges, trays.mass_kg, np.linspace(-half_width_m, half_width_m, bins + 1))
+    top = masses.max() if masses.size else 0.0
+    return masses / top if top > 0 else np.zeros(bins)
+
+
+def bout_features(trays: pattern.Trays, bout_width_m: float, driving: str, bins: int) -> np.ndarray:
+    """Overlapped pattern over one bout on `bins` bins, / mean / 2, clipped to [0, 1]."""
+    if trays.total_kg <= 0:
+        return np.zeros(bins)
+    bout = pattern.bout_pattern(trays, bout_width_m, driving)
+    n, w = bout.size, trays.width_m
+    start = (-(n // 2) - 0.5) * w
+    edges = start + w * np.arange(n + 1)
+    masses = rebin(edges, bout, np.linspace(edges[0], edges[-1], bins + 1))
+    mean = masses.mean()
+    return np.clip(masses / mean / 2.0, 0.0, 1.0) if mean > 0 else np.zeros(bins)
+
+
+class SpreaderTuningEnv(gym.Env):
+    """Adjust rpm, vane pitch and deflector angles step by step until the tray test passes."""
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 4}
+
+    def __init__(self, render_mode: Optional[str] = None, **kwargs: Any):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError("render_mode", f"unknown {render_mode!r}; allowed: {self.metadata['render_modes']}")
+        self.render_mode = render_mode
+        self.config = load_env_config(TUNING, kwargs)
+        self.task = Task(self.config)
+        smap = self.task.settings_map
+        obs_cfg = self.config.observation
+        self.observation_names = (
+            list(self.task.context_names)
+            + [f"setting:{n}" for n in smap.names]
+            + SUMMARY_NAMES
+            + [f"single_pass[{i}]" for i in range(obs_cfg.single_pass_bins)]
+            + [f"bout[{i}]" for i in range(obs_cfg.bout_bins)]
+        )
+        self.action_space = smap.space
+        self.observation_space = spaces.Box(-1.0, 1.0, shape=(len(self.observation_names),), dtype=np.float32)
+        self.reward_bounds = rewards.tuning_reward_bounds(self.config.reward)
+        self._context: Optional[Context] = None
+        self._scene: Optional[Scene] = None
+        self._context_info: dict = {}
+        self._context_obs = np.zeros(self.task.context_size, dtype=np.float32)
+        self._unit = np.zeros(smap.size)
+        self._steps = 0
+        self._last = None  # (scene, result, settings, score, reward)
+        self._viewer: Optional[HumanViewer] = None
+
+    # -- gymnasium API -----------------------------------------------------------------
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        super().reset(seed=seed)
+        smap = self.task.settings_map
+        context = self.task.sample_context(self.np_random)
+        if options and "context" in options:
+            context = self.task.replace_context(context, options["context"])
+        self._context = context
+        self._scene = self.task.context_scene(context)
+        self._context_info = self.task.context_info(context)
+        self._context_obs = self.task.encode_context(context, self._scene)
+        mode = self.config.initial_settings
+        if mode == "random":
+            self._unit = self.np_random.uniform(-1.0, 1.0, size=smap.size)
+        elif mode == "middle":
+            self._unit = np.zeros(smap.size)
+        else:
+            self._unit = smap.to_unit(smap.from_scene(self._scene))
+        self._steps = 0
+        result, settings, score = self._tray_test()
+        self._last = (result.scene, result, settings, score, None)
+        info = self._info(result, settings, score)
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(result, score), info
+
+    def step(self, action):
+        if self._context is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        smap = self.task.settings_map
+        a = check_action(action, smap.size)
+        self._unit = np.clip(self._unit + self.config.max_change * a, -1.0, 1.0)
+        self._steps += 1
+        result, settings, score = self._tray_test()
+        cv = result.metrics.get("cv_percent_at_target")
+        terminated = bool(cv is not None and cv <= self.config.goal_cv_percent)
+        truncated = bool(not terminated and self._steps >= self.config.max_steps)
+        reward = rewards.tuning_reward(score, self.config.reward, terminated)
+        self._last = (result.scene, result, settings, score, reward)
+        info = self._info(result, settings, score)
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(result, score), reward, terminated, truncated, info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() was called without a render mode; "
+                'make the env with render_mode="rgb_array" or "human"'
+            )
+            return None
+        r = self.config.render
+        if self._last is None:
+            frame = draw_frame(self.task.base_scene, None, r.width_px, r.height_px, r.trajectories,
+                               ["call reset() first"])
+        else:
+            scene, result, settings, score, reward = self._last
+            extra = [f"step {self._steps}/{self.config.max_steps}, goal CV <= {self.config.goal_cv_percent:g} %"]
+            lines = frame_lines(self._context, settings, score, reward if reward is not None else float("nan"), extra)
+            frame = draw_frame(scene, result, r.width_px, r.height_px, r.trajectories, lines)
+        if self.render_mode == "rgb_array":
+            return frame
+        if self._viewer is None:
+            self._viewer = HumanViewer(self.metadata["render_fps"])
+        self._viewer.show(frame)
+        return None
+
+    def close(self):
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+
+    # -- internals -----------------------------------------------------------------------
+    def _tray_test(self):
+        settings = self.task.settings_map.to_settings(self._unit)
+        seed = int(self.np_random.integers(SEED_BOUND))
+        result = self.task.run(self.task.settings_scene(self._scene, settings, seed),
+                               rendering=self.render_mode is not None)
+        return result, settings, rewards.score(result.metrics, self.config.reward)
+
+    def _observation(self, result, score: rewards.Score) -> np.ndarray:
+        obs_cfg = self.config.observation
+        scene = result.scene
+        summary = [
+            score.cv_term,
+            min(score.effective_swath_m / score.target_swath_m, 2.0) / 2.0,
+            score.landed_fraction,
+            (self.config.max_steps - self._steps) / self.config.max_steps,
+        ]
+        parts = [
+            self._context_obs,
+            self._unit,
+            np.clip(summary, 0.0, 1.0),
+            single_pass_features(result.trays, obs_cfg.single_pass_half_width_m, obs_cfg.single_pass_bins),
+            bout_features(result.trays, scene.pattern.target_swath_m, scene.pattern.driving, obs_cfg.bout_bins),
+        ]
+        obs = np.concatenate([np.asarray(p, dtype=np.float64) for p in parts])
+        return np.clip(obs, -1.0, 1.0).astype(np.float32)
+
+    def _info(self, result, settings, score: rewards.Score) -> dict:
+        return {
+            "metrics": info_metrics(result.metrics),
+            "settings": settings.as_dict(),
+            "context": copy.deepcopy(self._context_info),
+            "reward_terms": score.as_dict(),
+            "sim_seed": int(result.scene.sim.seed),
+            "steps": self._steps,
+        }
