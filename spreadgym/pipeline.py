@@ -18,6 +18,8 @@ from spreadgym import pattern
 from spreadgym.contacts import Contacts, resolve_contacts
 from spreadgym.granules import GranuleBatch, sample_granules
 from spreadgym.materials import MaterialLibrary, load_library
+from spreadgym.physics.analytic import simulate_analytic
+from spreadgym.physics.deflector_rays import deflect
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.pymunk_deflectors import deflect_pymunk
 from spreadgym.physics.pymunk_spinner import simulate_pymunk
@@ -48,6 +50,8 @@ def run_spinner(
     tracks: int = 0,
 ) -> Departure:
     """Departure states from the chosen spinner model (`tracks` paths kept for plots)."""
+    if model == "analytic":
+        return simulate_analytic(scene, granules, contacts)
     if model == "pymunk":
         return simulate_pymunk(scene, granules, contacts, progress=progress, track_count=tracks)
     raise AssertionError(f"model {model!r} has no runner")  # choose_model validated it
@@ -68,17 +72,20 @@ def run_scene(
     """
     started = time.perf_counter()
     library = library or load_library()
-    chosen, reason = choose_model(scene, model)
     contacts = resolve_contacts(scene, library)
+    chosen, reason = choose_model(scene, model, contacts)
     fertilizer = library.fertilizer(scene.fertilizer)
     rng = np.random.default_rng(scene.sim.seed)
     granules = sample_granules(scene, fertilizer, rng)
 
     departure = run_spinner(scene, granules, contacts, chosen, progress, tracks)
-    launch = deflect_pymunk(
-        departure, scene.deflectors, contacts.deflectors, granules.radius_m, granules.mass_kg,
-        scene.granule.rotation,
-    )
+    if chosen == "analytic":
+        launch = deflect(departure, scene.deflectors, contacts.deflectors, granules.radius_m, scene.granule.rotation)
+    else:
+        launch = deflect_pymunk(
+            departure, scene.deflectors, contacts.deflectors, granules.radius_m, granules.mass_kg,
+            scene.granule.rotation,
+        )
     flying = launch.departed
     velocity3 = np.column_stack([launch.velocity_m_s[flying], launch.vertical_velocity_m_s[flying]])
     height = np.maximum(scene.spinner.height_m + launch.height_m[flying], 0.0)
