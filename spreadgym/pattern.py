@@ -223,12 +223,16 @@ def effective_swath_m(trays: Trays, driving: str, threshold_percent: float,
     """The largest bout width whose CV is at or below threshold_percent (0.0 if
     none). Non-monotone curves: the largest satisfying width wins, even if some
     narrower widths fail."""
+    return swath_from_curve(*cv_curve(trays, driving, widths_m), threshold_percent)
+
+
+def swath_from_curve(widths_m: np.ndarray, cvs_percent: np.ndarray, threshold_percent: float) -> float:
+    """The largest width of a computed CV curve whose CV meets the threshold (0.0 if none)."""
     thr = float(threshold_percent)
     if not (np.isfinite(thr) and thr > 0):
         raise ConfigError("pattern.cv_threshold_percent", f"must be > 0, got {threshold_percent!r}")
-    widths, cvs = cv_curve(trays, driving, widths_m)
-    ok = np.isfinite(cvs) & (cvs <= thr * (1.0 + 1e-12))
-    return float(widths[ok].max()) if ok.any() else 0.0
+    ok = np.isfinite(cvs_percent) & (cvs_percent <= thr * (1.0 + 1e-12))
+    return float(widths_m[ok].max()) if ok.any() else 0.0
 
 
 def cv_confidence_interval(
