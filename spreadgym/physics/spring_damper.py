@@ -531,7 +531,7 @@ def simulate_spring_damper(
 
     def finish(mask, position, velocity, spin):
         """Store the last state of granules that leave the working set retained."""
-        kept = idx[mask] if mask.dtype == bool else idx
+        kept = idx[mask]
         out_position[kept], out_velocity[kept], out_spin[kept] = position.T, velocity.T, spin
         out_height[kept], out_vz[kept] = vertical.z[mask], vertical.vz[mask]
 
@@ -617,10 +617,9 @@ def simulate_spring_damper(
 
     if live.any():  # time limit
         finish(live, x[:, live], v[:, live], s[live])
-        out_time[idx[live]] = t
+    # Retained granules keep their last state; their time is the end of the run (as in pymunk).
+    out_time[outcome != DEPARTED] = t
     tracks = _machine_frame_tracks(track_points, out_position[tracked], spinner_angle[tracked])
-    stuck = outcome == RETAINED_STUCK
-    out_time[stuck] = np.where(out_time[stuck] > 0.0, out_time[stuck], 0.0)
     zeta = damping_ratio(contacts.vane_restitution)
     median_mass = float(np.median(granules.mass_kg))
     contact = spring_dashpot(median_mass, contacts.vane_restitution, choice.contact_time_s)
