@@ -24,6 +24,7 @@ from spreadgym.physics.departure import Departure
 from spreadgym.physics.pymunk_deflectors import deflect_pymunk
 from spreadgym.physics.pymunk_spinner import simulate_pymunk
 from spreadgym.physics.selection import choose_model
+from spreadgym.physics.spring_damper import simulate_spring_damper
 from spreadgym.scene import Scene
 
 CI_LEVEL = 0.95
@@ -54,6 +55,8 @@ def run_spinner(
         return simulate_analytic(scene, granules, contacts)
     if model == "pymunk":
         return simulate_pymunk(scene, granules, contacts, progress=progress, track_count=tracks)
+    if model == "spring-damper":
+        return simulate_spring_damper(scene, granules, contacts, progress=progress, track_count=tracks)
     raise AssertionError(f"model {model!r} has no runner")  # choose_model validated it
 
 
@@ -79,7 +82,7 @@ def run_scene(
     granules = sample_granules(scene, fertilizer, rng)
 
     departure = run_spinner(scene, granules, contacts, chosen, progress, tracks)
-    if chosen == "analytic":
+    if chosen == "analytic":  # exact rays; the stepped models keep plates in pymunk
         launch = deflect(departure, scene.deflectors, contacts.deflectors, granules.radius_m, scene.granule.rotation)
     else:
         launch = deflect_pymunk(
