@@ -5,4 +5,5 @@ AGENT_COMMANDS = (
     "spreadgym.agents.commands.evaluate",
     "spreadgym.agents.commands.compare",
     "spreadgym.agents.commands.demo",
+    "spreadgym.agents.commands.bench",
 )

@@ -8,6 +8,5 @@ CORE_COMMANDS = (
     "spreadgym.commands.materials",
     "spreadgym.commands.calibrate",
     "spreadgym.commands.simulate",
-    "spreadgym.commands.bench",
     "spreadgym.commands.study",
 )

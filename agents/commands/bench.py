@@ -1,17 +1,21 @@
-"""`spreadgym bench`: speed (and speed against accuracy) measurements, written under docs/."""
+"""`spreadgym bench`: speed (and speed against accuracy) measurements, written under docs/.
+
+It sits in the agents layer because it measures every layer, the environments too.
+"""
 
 from __future__ import annotations
 
 import argparse
 import csv
 import os
+import sys
 from pathlib import Path
 
 from spreadgym.report import format_table
 
 NAME = "bench"
 HELP = "run the benchmarks (speed, speed against accuracy) and write CSV/PNG under --out"
-SECTIONS = ("spinner", "flight", "cv-noise")
+SECTIONS = ("spinner", "flight", "env", "cv-noise", "speed-accuracy", "stability")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,7 +33,7 @@ def write_csv(rows: list[dict], path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from spreadgym import benchmarks
+    from spreadgym import benchmarks, stability
     from spreadgym.errors import SpreadgymError
 
     if args.repeats < 1:
@@ -39,9 +43,13 @@ def run(args: argparse.Namespace) -> int:
     runners = {
         "spinner": lambda: benchmarks.spinner_benchmark(repeats=args.repeats),
         "flight": lambda: benchmarks.flight_benchmark(repeats=max(args.repeats, 5)),
+        "env": lambda: env_steps_per_second(),
         "cv-noise": lambda: benchmarks.cv_noise_benchmark(),
+        "speed-accuracy": lambda: benchmarks.speed_accuracy_benchmark(progress=lambda text: print(text, file=sys.stderr)),
+        "stability": lambda: stability.stability_rows(
+            stability.plot_stability_map(args.out.parent / "stability_map.png")),
     }
-    plots = {"cv-noise": benchmarks.plot_cv_noise}
+    plots = {"cv-noise": benchmarks.plot_cv_noise, "speed-accuracy": benchmarks.plot_speed_accuracy}
     for name in sections:
         rows = runners[name]()
         write_csv(rows, args.out / f"{name}.csv")
@@ -51,3 +59,27 @@ def run(args: argparse.Namespace) -> int:
         print(format_table([list(r.values()) for r in rows], list(rows[0])))
         print()
     return 0
+
+
+def env_steps_per_second(steps: int = 40) -> list[dict]:
+    """Env steps per second at the default config of each environment (one process)."""
+    import time
+
+    import gymnasium as gym
+
+    rows = []
+    for env_id in ("spreadgym:SpinnerDesign-v0", "spreadgym:SpreaderTuning-v0"):
+        env = gym.make(env_id)
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        start = time.perf_counter()
+        for _ in range(steps):
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            if terminated or truncated:
+                env.reset()
+        wall = time.perf_counter() - start
+        config = env.unwrapped.config
+        rows.append({"env": env_id, "model": config.model, "granules": config.granules, "steps": steps,
+                     "steps_per_s": steps / wall, "ms_per_step": 1e3 * wall / steps})
+        env.close()
+    return rows
