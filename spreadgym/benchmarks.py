@@ -243,7 +243,8 @@ def plot_speed_accuracy(rows: list[dict], path) -> None:
         cost = np.array([r["wall_per_granule_s"] for r in data])
         for ax, (key, label) in zip(row_axes, metrics):
             err = np.array([r[key] for r in data])
-            shown = np.maximum(err, 1e-4 if key != "swath_error_m" else 1e-3)
+            log_axis = key != "swath_error_m"  # swath errors come in whole trays, zero included
+            shown = np.maximum(err, 1e-4) if log_axis else err
             for method, (marker, colour) in styles.items():
                 pick = np.array([r["method"] == method for r in data])
                 if pick.any():
@@ -256,7 +257,7 @@ def plot_speed_accuracy(rows: list[dict], path) -> None:
                 ax.annotate(f"{r['granules']}" + (f" x{r['dt_factor']:g}" if r["method"] == "pymunk" else ""),
                             (c * 1e3, e), fontsize=6, xytext=(3, 3), textcoords="offset points")
             ax.set_xscale("log")
-            ax.set_yscale("log")
+            ax.set_yscale("log" if log_axis else "linear")
             ax.set_xlabel("wall time per granule (ms)")
             ax.set_ylabel(label)
             ax.set_title(f"{scene}", fontsize=10)
