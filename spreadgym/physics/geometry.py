@@ -1,4 +1,4 @@
-"""Vane geometry at spinner angle 0, shared by every spinner model.
+"""Geometry shared by every spinner model: vanes at spinner angle 0, crossings, frames.
 
 Vane k has its inner end at radius r_in on the angle 2*pi*k/N. Its direction is the
 radial unit vector there turned by pitch * sign(omega): a positive pitch leans the tip
@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from spreadgym.granules import rotate
 from spreadgym.scene import Scene
 
 
@@ -28,3 +29,28 @@ def vane_segments(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     b = np.sum(inner * u, axis=1)
     length = -b + np.sqrt(b * b + r_out * r_out - r_in * r_in)
     return inner, inner + length[:, None] * u
+
+
+def machine_frame_tracks(points, end_points, start_angle) -> list[np.ndarray]:
+    """Recorded paths (one row per step, NaN once finished) in the machine frame.
+
+    The simulation frame is the machine frame turned by a constant angle per granule.
+    """
+    if not points:
+        return []
+    stacked = np.stack(points)  # (T, k, 2)
+    tracks = []
+    for k in range(stacked.shape[1]):
+        path = np.vstack([stacked[:, k][~np.isnan(stacked[:, k, 0])], end_points[k]])
+        tracks.append(rotate(path, np.full(path.shape[0], start_angle[k])))
+    return tracks
+
+
+def crossing_fraction(p0: np.ndarray, p1: np.ndarray, radius: float) -> np.ndarray:
+    """Fraction f in [0, 1] of the step at which |p0 + f (p1 - p0)| = radius."""
+    d = p1 - p0
+    a = np.sum(d * d, axis=1)
+    b = 2.0 * np.sum(p0 * d, axis=1)
+    c = np.sum(p0 * p0, axis=1) - radius * radius
+    root = (-b + np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))) / np.maximum(2.0 * a, 1e-300)
+    return np.clip(root, 0.0, 1.0)

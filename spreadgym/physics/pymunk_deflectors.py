@@ -19,7 +19,7 @@ import pymunk.batch as batch
 
 from spreadgym.contacts import PlateContact
 from spreadgym.physics.departure import Departure
-from spreadgym.physics.pymunk_spinner import _crossing_fraction
+from spreadgym.physics.geometry import crossing_fraction
 from spreadgym.physics.vertical import GRAVITY_M_S2
 from spreadgym.scene import Deflector
 
@@ -184,7 +184,7 @@ def _run_group(group, plates, contacts, radius_m, mass_kg, rotation, zone, dt,
         out = np.hypot(p1[:, 0], p1[:, 1]) >= zone
         if out.any():
             i = rows[out]
-            f = _crossing_fraction(position[i], p1[out], zone)
+            f = crossing_fraction(position[i], p1[out], zone)
             position[i] = position[i] + f[:, None] * (p1[out] - position[i])
             velocity[i] = velocity[i] + f[:, None] * (v1[out] - velocity[i])
             spin[i] = spin[i] + f * (w1[out] - spin[i])

@@ -28,7 +28,7 @@ from spreadgym.contacts import Contacts
 from spreadgym.granules import GranuleBatch, rotate
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
 from spreadgym.physics.disc_friction import disc_surface_velocity, friction_velocity_change
-from spreadgym.physics.geometry import vane_segments
+from spreadgym.physics.geometry import crossing_fraction, machine_frame_tracks, vane_segments
 from spreadgym.physics.numerics import choose_time_step, collision_bias_for
 from spreadgym.physics.vertical import GRAVITY_M_S2, VerticalState, free_fall_to
 from spreadgym.scene import Scene
@@ -179,7 +179,7 @@ def simulate_pymunk(
         leaving = r_new >= radius
         if leaving.any():
             li = idx[leaving]
-            frac = _crossing_fraction(position[li], new_pos[leaving], radius)
+            frac = crossing_fraction(position[li], new_pos[leaving], radius)
             out_position[li] = position[li] + frac[:, None] * (new_pos[leaving] - position[li])
             out_velocity[li] = velocity[li] + frac[:, None] * (new_vel[leaving] - velocity[li])
             out_spin[li] = spin[li] + frac * (new_spin[leaving] - spin[li])
@@ -237,7 +237,7 @@ def simulate_pymunk(
             progress(t)
 
     # Retained granules keep their last state.
-    tracks = _machine_frame_tracks(track_points, out_position[tracked], spinner_angle[tracked])
+    tracks = machine_frame_tracks(track_points, out_position[tracked], spinner_angle[tracked])
     kept = outcome != DEPARTED
     out_position[kept], out_velocity[kept], out_spin[kept] = position[kept], velocity[kept], spin[kept]
     out_height[kept], out_vz[kept], out_time[kept] = vertical.z[kept], vertical.vz[kept], t
@@ -257,28 +257,3 @@ def simulate_pymunk(
         ],
         tracks=tracks,
     )
-
-
-def _machine_frame_tracks(points, end_points, start_angle) -> list[np.ndarray]:
-    """Recorded paths (one row per step, NaN once finished) in the machine frame.
-
-    The simulation frame is the machine frame turned by a constant angle per granule.
-    """
-    if not points:
-        return []
-    stacked = np.stack(points)  # (T, k, 2)
-    tracks = []
-    for k in range(stacked.shape[1]):
-        path = np.vstack([stacked[:, k][~np.isnan(stacked[:, k, 0])], end_points[k]])
-        tracks.append(rotate(path, np.full(path.shape[0], start_angle[k])))
-    return tracks
-
-
-def _crossing_fraction(p0: np.ndarray, p1: np.ndarray, radius: float) -> np.ndarray:
-    """Fraction f in [0, 1] of the step at which |p0 + f (p1 - p0)| = radius."""
-    d = p1 - p0
-    a = np.sum(d * d, axis=1)
-    b = 2.0 * np.sum(p0 * d, axis=1)
-    c = np.sum(p0 * p0, axis=1) - radius * radius
-    root = (-b + np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))) / np.maximum(2.0 * a, 1e-300)
-    return np.clip(root, 0.0, 1.0)

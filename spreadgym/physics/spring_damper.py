@@ -66,9 +66,8 @@ from spreadgym.errors import ConfigError, MaterialError
 from spreadgym.granules import GranuleBatch, rotate
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
 from spreadgym.physics.disc_friction import disc_surface_velocity, friction_velocity_change
-from spreadgym.physics.geometry import vane_segments
+from spreadgym.physics.geometry import crossing_fraction, machine_frame_tracks, vane_segments
 from spreadgym.physics.numerics import OMEGA_DT_MAX, TUNNEL_SAFETY, tunnelling_limit_s
-from spreadgym.physics.pymunk_spinner import _crossing_fraction, _machine_frame_tracks
 from spreadgym.physics.vertical import GRAVITY_M_S2, VerticalState, free_fall_to
 from spreadgym.scene import Scene
 
@@ -551,7 +550,7 @@ def simulate_spring_damper(
         finished = None
         if leaving.any():
             li = idx[leaving]
-            frac = _crossing_fraction(x_prev[:, leaving].T, x[:, leaving].T, radius)
+            frac = crossing_fraction(x_prev[:, leaving].T, x[:, leaving].T, radius)
             out_position[li] = (x_prev[:, leaving] + frac * (x[:, leaving] - x_prev[:, leaving])).T
             out_velocity[li] = (v_prev[:, leaving] + frac * (v[:, leaving] - v_prev[:, leaving])).T
             out_spin[li] = s_prev[leaving] + frac * (s[leaving] - s_prev[leaving])
@@ -619,7 +618,7 @@ def simulate_spring_damper(
         finish(live, x[:, live], v[:, live], s[live])
     # Retained granules keep their last state; their time is the end of the run (as in pymunk).
     out_time[outcome != DEPARTED] = t
-    tracks = _machine_frame_tracks(track_points, out_position[tracked], spinner_angle[tracked])
+    tracks = machine_frame_tracks(track_points, out_position[tracked], spinner_angle[tracked])
     zeta = damping_ratio(contacts.vane_restitution)
     median_mass = float(np.median(granules.mass_kg))
     contact = spring_dashpot(median_mass, contacts.vane_restitution, choice.contact_time_s)
