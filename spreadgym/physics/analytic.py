@@ -12,19 +12,28 @@ Every granule is followed in three stages, all vectorised over granules:
    motion at the landing point (exact for mu_d = 0; valid while the drift speed is
    small against the disc speed; capped at half the disc speed, so the granule never
    outruns the vanes; notes count the granules that reach the cap).
-2. Catch. The leading face of the first vane to reach the granule catches it in a
-   perfectly plastic impact: the relative velocity normal to the face is lost, the
-   component along it is kept, spin unchanged (none). A release point closer to the
-   axis than the face's inner end is moved radially out to it (the vane's inner end
-   sweeps it up); one beyond the face's reach is moved in to the tip. A granule that
-   lands overlapping a vane (plan view) is pushed to the nearer face: the leading face
-   catches it at once, from the trailing face it waits for the next vane.
+2. Catch. The leading face of the first vane to reach the granule strikes it at the
+   relative normal speed a (Omega x for a granule at rest). The impact reverses the
+   normal relative velocity with the pair's restitution e (contacts.vane_restitution)
+   and applies Coulomb friction: a tangential impulse of at most mu_v (1 + e) a that
+   stops the slip of the contact point but never reverses it (for rotation "free" it
+   spins the granule up: the slip changes by the impulse times 1 + 1/kappa). The
+   granule then flies ahead of the face (a straight line in the machine frame with
+   the disc's drag to first order) until the face catches it again, which is the next
+   impact, and so on; once a rebound is slower than REBOUND_STOP * Omega x the impact
+   is plastic and the granule stays on the face. e = 0: one plastic impact (still
+   with its friction impulse). A release point closer to the axis than the face's
+   inner end is moved radially out to it (the vane's inner end sweeps it up); one
+   beyond the face's reach is moved in to the tip. A granule that lands overlapping a
+   vane (plan view) is pushed to the nearer face: the leading face catches it at once,
+   from the trailing face it waits for the next vane.
 3. Along the vane: `spreadgym.physics.vane_slide.run_along_vane` (exact closed forms:
    slide; for rotation "free" slide, then roll without slip once friction can hold it;
-   hops off the face when the normal force would be negative; see that module).
-   Departure when the centre reaches the disc radius R; if the contact point reaches
-   the vane tip first (vanes shorter than R, or pitched forwards), the granule flies
-   on in a straight line in the machine frame to R (disc friction neglected there).
+   hops off the face when the normal force would be negative, flights after rebounds,
+   impacts at every re-catch; see that module). Departure when the centre reaches the
+   disc radius R; if the contact point reaches the vane tip first (vanes shorter than
+   R, or pitched forwards), the granule flies on in a straight line in the machine
+   frame to R (disc friction neglected there).
 
 Departure state: position on the circle |c| = R, horizontal velocity in the machine
 frame, spin about z (machine frame; 0 when locked), height 0, vertical velocity 0,
@@ -42,7 +51,7 @@ import numpy as np
 from spreadgym.contacts import Contacts
 from spreadgym.granules import GranuleBatch, rotate
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
-from spreadgym.physics.vane_slide import KAPPA_SPHERE, run_along_vane, solve_increasing
+from spreadgym.physics.vane_slide import KAPPA_SPHERE, REBOUND_STOP, run_along_vane, solve_increasing
 from spreadgym.scene import Scene
 
 GRAVITY_M_S2 = 9.81
@@ -50,12 +59,14 @@ DRIFT_CAP = 0.5  # first-order disc drag: drift speed capped at this fraction of
 TWO_PI = 2.0 * math.pi
 
 ASSUMPTIONS = (
-    "analytic: plan view, closed forms; no bounces (drop: fall time only, vertical speed lost at landing)",
+    "analytic: plan view, closed forms; no bounces on the disc (drop: fall time only, vertical speed lost at landing)",
     "analytic: vanes can catch a falling granule once it is below the vane tops; disc drag only once it has landed",
     "analytic: disc drag before the catch taken to first order (constant mu_d g along the disc motion)",
-    "analytic: catch is perfectly plastic (normal relative velocity lost, along-vane kept, no spin)",
+    "analytic: catch and re-catches are impacts with the vane restitution and a Coulomb friction impulse; "
+    "bouncing ends (plastic) once a rebound is below %g Omega x" % REBOUND_STOP,
     "analytic: spin about the vertical axis only, sphere I = 2/5 m r^2; no drilling or rolling on the disc",
-    "analytic: disc friction neglected during hops off the face and after leaving a vane tip",
+    "analytic: disc drag to first order during flights off the face (closed form along the straight line); "
+    "neglected after leaving a vane tip",
 )
 
 
@@ -97,7 +108,8 @@ class Catch:
     time_s: np.ndarray  # (n,) time from release to the catch
     x_m: np.ndarray  # (n,) position along the face line, c.u
     w_m: np.ndarray  # (n,) c.n
-    speed_along_m_s: np.ndarray  # (n,) relative velocity along the face just after the catch
+    speed_along_m_s: np.ndarray  # (n,) relative velocity along the face just before the impact
+    approach_m_s: np.ndarray  # (n,) relative speed towards the face (normal) just before the impact
     moved_in: np.ndarray  # (n,) release point moved radially onto the face's reach
     snapped: np.ndarray  # (n,) landed overlapping the vane, pushed onto the leading face
     drift_capped: np.ndarray  # (n,) first-order drift reached its cap
@@ -184,9 +196,11 @@ def catch_granules(scene: Scene, granules: GranuleBatch, contacts: Contacts,
     x = np.sqrt(np.maximum(rho * rho - wk * wk, 0.0))
     # machine-frame velocity r' e_r + D' e_phi seen along the face: e_r.u = x/rho, e_phi.u = -w/rho
     v_along = Om * wk + (r_dot * x - Dp * wk) / rho
-    x = np.clip(x, geo.p_u[k], geo.x_tip[k])
+    # and normal to it (e_r.n = w/rho, e_phi.n = x/rho): the face comes at Omega x
+    xc = np.clip(x, geo.p_u[k], geo.x_tip[k])
+    approach = np.maximum(Om * xc - (r_dot * wk + Dp * x) / rho, 0.0)
     return Catch(
-        vane=k, time_s=t_top + tau, x_m=x, w_m=wk, speed_along_m_s=v_along, moved_in=moved,
+        vane=k, time_s=t_top + tau, x_m=xc, w_m=wk, speed_along_m_s=v_along, approach_m_s=approach, moved_in=moved,
         snapped=snap[rows, k], drift_capped=(np.maximum(tau - tau_land, 0.0) > cap_time),
     )
 
@@ -198,8 +212,17 @@ def simulate_analytic(
     *,
     gravity_m_s2: float = GRAVITY_M_S2,
     time_limit_s: float = 3.0,
+    impact_friction: bool = True,
+    flight_drag: bool = True,
+    rebound_stop: float = REBOUND_STOP,
 ) -> Departure:
-    """Departure states of `granules` by the closed-form model (see the module docstring)."""
+    """Departure states of `granules` by the closed-form model (see the module docstring).
+
+    impact_friction: Coulomb friction impulse at the catch and re-catches (False: the
+    tangential relative velocity is kept); flight_drag: first-order disc drag during
+    flights off the face; rebound_stop: rebounds below rebound_stop * Omega x end the
+    bouncing. The defaults are the model; the switches are for studies and tests.
+    """
     omega = scene.spinner.omega_rad_s
     Om = abs(omega)
     sense = math.copysign(1.0, omega)
@@ -216,6 +239,8 @@ def simulate_analytic(
         contacts.vane_friction, contacts.disc_friction, r, rotation=rotation, kappa=KAPPA_SPHERE,
         g=gravity_m_s2, time_limit_s=np.maximum(time_limit_s - catch.time_s, 0.0),
         disc_contact_from_s=np.maximum(t_land - catch.time_s, 0.0),
+        approach_speed0=catch.approach_m_s, restitution=contacts.vane_restitution,
+        impact_friction=impact_friction, flight_drag=flight_drag, rebound_stop=rebound_stop,
     )
     t = catch.time_s + run.t_s
     u, nn = geo.u[k], geo.n[k]
@@ -243,7 +268,9 @@ def simulate_analytic(
         "release point moved onto the face's reach": int(catch.moved_in.sum()),
         "landed overlapping a vane, caught at once": int(catch.snapped.sum()),
         "first-order disc drag reached its cap": int(catch.drift_capped.sum()),
-        "hopped off the face after the catch (normal force < 0)": int(np.sum(run.hops > 0)),
+        "bounced off the face (restitution %g)" % contacts.vane_restitution: int(np.sum(run.bounces > 0)),
+        "hopped off the face (normal force < 0) and were caught again": int(np.sum(run.hops > 0)),
+        "came to rest on the disc during a flight (disc drag)": int(np.sum(run.flight_stops > 0)),
         "rolled on the face (no slip) for part of the way": int(np.sum(run.stick_time_s > 0)),
         "rolling broke into sliding": int(np.sum(run.stick_breaks > 0)),
         "left at the vane tip before reaching R": int(run.left_at_tip.sum()),
