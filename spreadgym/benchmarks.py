@@ -96,6 +96,24 @@ def spinner_benchmark(granules: int = 2000, repeats: int = 3) -> list[dict]:
     }]
 
 
+def method_speed_benchmark(granules: int = 2000, repeats: int = 3) -> list[dict]:
+    """analytic against pymunk on a scene both serve (paper spinner, no drop)."""
+    from spreadgym.physics.analytic import simulate_analytic
+
+    library = load_library()
+    scene = load_scene("paper", {"sim.granules": granules, "feed.drop_height_m": 0.0})
+    contacts = resolve_contacts(scene, library)
+    batch_ = sample_granules(scene, library.fertilizer(scene.fertilizer), np.random.default_rng(0))
+    wall_a, dep_a = median_time(lambda: simulate_analytic(scene, batch_, contacts), repeats)
+    wall_p, dep_p = median_time(lambda: simulate_pymunk(scene, batch_, contacts), repeats)
+    return [{
+        "scene": "paper, drop 0", "granules": granules, "analytic_wall_s": wall_a, "pymunk_wall_s": wall_p,
+        "speedup": wall_p / wall_a,
+        "speed_difference_percent": 100.0 * (dep_a.speed_m_s[dep_a.departed].mean()
+                                             / dep_p.speed_m_s[dep_p.departed].mean() - 1.0),
+    }]
+
+
 def flight_benchmark(counts=(2000, 20000), repeats: int = 5) -> list[dict]:
     """Granules per second of the flight solver on paper-scene launch states."""
     scene = load_scene("paper")

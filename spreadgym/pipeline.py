@@ -76,7 +76,7 @@ def run_scene(
     started = time.perf_counter()
     library = library or load_library()
     contacts = resolve_contacts(scene, library)
-    chosen, reason = choose_model(scene, model, contacts)
+    chosen, reason = choose_model(scene, model)
     fertilizer = library.fertilizer(scene.fertilizer)
     rng = np.random.default_rng(scene.sim.seed)
     granules = sample_granules(scene, fertilizer, rng)

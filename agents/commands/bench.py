@@ -15,7 +15,7 @@ from spreadgym.report import format_table
 
 NAME = "bench"
 HELP = "run the benchmarks (speed, speed against accuracy) and write CSV/PNG under --out"
-SECTIONS = ("spinner", "flight", "env", "cv-noise", "speed-accuracy", "stability")
+SECTIONS = ("spinner", "methods", "flight", "env", "cv-noise", "speed-accuracy", "stability")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     sections = args.only or list(SECTIONS)
     runners = {
         "spinner": lambda: benchmarks.spinner_benchmark(repeats=args.repeats),
+        "methods": lambda: benchmarks.method_speed_benchmark(repeats=args.repeats),
         "flight": lambda: benchmarks.flight_benchmark(repeats=max(args.repeats, 5)),
         "env": lambda: env_steps_per_second(),
         "cv-noise": lambda: benchmarks.cv_noise_benchmark(),
