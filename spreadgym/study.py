@@ -142,7 +142,7 @@ def _run_case(case: Case, granules: int, rotation: str, model: str, seed: int, l
 
     scene = study_scene(case, granules, rotation, seed)
     contacts = resolve_contacts(scene, library)
-    chosen, _ = choose_model(scene, model, contacts)
+    chosen, _ = choose_model(scene, model)
     fertilizer = library.fertilizer(scene.fertilizer)
     batch = sample_granules(scene, fertilizer, np.random.default_rng(scene.sim.seed))
     departure = run_spinner(scene, batch, contacts, chosen)
