@@ -1,0 +1,621 @@
+"""Training with stable-baselines3 (PPO or SAC) on the spreadgym envs, with resume.
+
+Config: one YAML per algorithm (`configs/agents/ppo.yaml`, `configs/agents/sac.yaml`),
+flat like rl-baselines3-zoo's: the run keys below plus the algorithm's own keyword
+arguments (`learning_rate`, `n_steps`, `batch_size`, ...). A key that is neither a
+run key nor a keyword of the algorithm is an error naming it.
+
+Run keys:
+    algo             ppo | sac (optional; must match --algo)
+    env              env id (spreadgym:SpinnerDesign-v0 or spreadgym:SpreaderTuning-v0)
+    env_kwargs       gym.make keyword arguments (checked by the env: unknown keys fail)
+    n_envs           parallel envs: SubprocVecEnv when > 1, DummyVecEnv when 1
+    n_timesteps      total env steps of the run
+    normalize        false | true | {norm_obs, norm_reward, clip_obs, clip_reward, gamma}
+    seed             seed of the model and the envs
+    checkpoint_freq  env steps between checkpoints
+    max_minutes      wall-clock limit of one invocation (null: none)
+    policy           MlpPolicy
+    policy_kwargs    e.g. {net_arch: [64, 64], activation_fn: tanh, log_std_init: -1.0}
+
+Learning rates (and PPO's clip_range) may be a number or `lin_<value>` (linear decay
+to 0, as in the zoo).
+
+Output folder DIR:
+    DIR/config.yaml               the config the run used (+ a `trained:` record)
+    DIR/model.zip                 the final policy
+    DIR/vecnormalize.pkl          normalisation statistics (if `normalize`)
+    DIR/checkpoints/rl_model_<N>_steps.zip (+ _replay_buffer_ / _vecnormalize_ .pkl)
+    DIR/tb/                       TensorBoard logs
+
+Resume: when DIR/checkpoints holds a checkpoint, `train` loads the newest complete
+one (model, SAC replay buffer, VecNormalize statistics) and continues until the
+total `n_timesteps` (the --timesteps given now, else the saved config's), with the
+saved config. Ctrl-C (or SIGTERM) stops at the next env step and saves a checkpoint.
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import inspect
+import os
+import pickle
+import re
+import signal
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Optional
+
+import yaml
+
+from spreadgym.errors import ConfigError, SpreadgymError
+
+ALGOS = ("ppo", "sac")
+RUN_KEYS = ("algo", "env", "env_kwargs", "n_envs", "n_timesteps", "normalize", "seed", "checkpoint_freq",
+            "max_minutes", "policy", "policy_kwargs")
+WRITTEN_KEYS = ("trained",)  # written into DIR/config.yaml by train, ignored when read back
+RESERVED = {"policy", "env", "tensorboard_log", "verbose", "seed", "device", "_init_setup_model", "policy_kwargs"}
+NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
+ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu", "silu")
+CHECKPOINT_PREFIX = "rl_model"
+CHECKPOINT_RE = re.compile(rf"^{CHECKPOINT_PREFIX}_(\d+)_steps\.zip$")
+SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
+
+
+def algo_class(algo: str):
+    if algo not in ALGOS:
+        raise SpreadgymError(f"unknown algorithm {algo!r}; known: {', '.join(ALGOS)}")
+    from stable_baselines3 import PPO, SAC
+
+    return {"ppo": PPO, "sac": SAC}[algo]
+
+
+def hyperparameter_names(algo: str) -> list[str]:
+    params = inspect.signature(algo_class(algo).__init__).parameters
+    return sorted(k for k in params if k != "self" and k not in RESERVED)
+
+
+# -- config ---------------------------------------------------------------------------------
+
+def default_config_path(algo: str) -> Path:
+    from spreadgym.resources import config_dir
+
+    return config_dir() / "agents" / f"{algo}.yaml"
+
+
+def read_config(path: Path) -> dict:
+    from spreadgym.resources import read_yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("--config", f"no such file {str(path)!r}")
+    raw = read_yaml(path)
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise ConfigError(str(path), f"expected a mapping of keys, got {type(raw).__name__}")
+    return raw
+
+
+def set_dotted(config: dict, assignments: dict[str, Any]) -> dict:
+    """Set dotted keys (`--set learning_rate=1e-3`, `--set env_kwargs.granules=500`).
+
+    New keys may be created (they are validated afterwards like the YAML's)."""
+    out = copy.deepcopy(config)
+    for dotted, value in assignments.items():
+        parts = dotted.split(".")
+        node = out
+        for part in parts[:-1]:
+            if node.get(part) is None or node.get(part) is False or node.get(part) is True:
+                node[part] = {}
+            if not isinstance(node[part], dict):
+                raise ConfigError(dotted, f"{part} is not a mapping")
+            node = node[part]
+        node[parts[-1]] = value
+    return out
+
+
+def _unknown(key: str, known: list[str], where: str) -> ConfigError:
+    close = difflib.get_close_matches(key, known, n=1)
+    hint = f" (did you mean {close[0]}?)" if close else ""
+    return ConfigError(key, f"unknown key in {where}{hint}; known keys: {', '.join(known)}")
+
+
+def validate_config(algo: str, raw: dict, where: str) -> dict:
+    """Check the keys and the run values; returns {run keys..., "hyperparams": {...}}."""
+    from spreadgym.agents.evaluation import canonical_env_id
+
+    hyper_names = hyperparameter_names(algo)
+    known = sorted(set(RUN_KEYS) | set(hyper_names))
+    cfg: dict[str, Any] = {"hyperparams": {}}
+    for key, value in raw.items():
+        if key in WRITTEN_KEYS:
+            continue
+        if key in RUN_KEYS:
+            cfg[key] = value
+        elif key in hyper_names:
+            cfg["hyperparams"][key] = value
+        else:
+            raise _unknown(str(key), known, where)
+    if cfg.get("algo") not in (None, algo):
+        raise ConfigError("algo", f"{where} is a config for {cfg['algo']!r}, not for {algo!r}")
+    cfg["algo"] = algo
+    cfg["env"] = canonical_env_id(str(cfg.get("env") or "spreadgym:SpinnerDesign-v0"))
+    env_kwargs = cfg.get("env_kwargs") or {}
+    if not isinstance(env_kwargs, dict):
+        raise ConfigError("env_kwargs", f"expected a mapping, got {env_kwargs!r}")
+    cfg["env_kwargs"] = env_kwargs
+    cfg["n_envs"] = _positive_int(cfg.get("n_envs", 1), "n_envs")
+    cfg["n_timesteps"] = _positive_int(cfg.get("n_timesteps", 10_000), "n_timesteps")
+    cfg["checkpoint_freq"] = _positive_int(cfg.get("checkpoint_freq", 1000), "checkpoint_freq")
+    cfg["seed"] = int(cfg.get("seed") or 0)
+    minutes = cfg.get("max_minutes")
+    if minutes is not None and not (isinstance(minutes, (int, float)) and minutes > 0):
+        raise ConfigError("max_minutes", f"expected a positive number of minutes or null, got {minutes!r}")
+    cfg["max_minutes"] = minutes
+    cfg["policy"] = str(cfg.get("policy") or "MlpPolicy")
+    cfg["normalize"] = _normalize_kwargs(cfg.get("normalize", False))
+    policy_kwargs = cfg.get("policy_kwargs") or {}
+    if not isinstance(policy_kwargs, dict):
+        raise ConfigError("policy_kwargs", f"expected a mapping, got {policy_kwargs!r}")
+    act = policy_kwargs.get("activation_fn")
+    if act is not None and act not in ACTIVATIONS:
+        raise ConfigError("policy_kwargs.activation_fn", f"unknown {act!r}; known: {', '.join(ACTIVATIONS)}")
+    cfg["policy_kwargs"] = policy_kwargs
+    for key in SCHEDULE_KEYS:
+        if key in cfg["hyperparams"]:
+            _schedule(cfg["hyperparams"][key], key)  # validates
+    return cfg
+
+
+def _positive_int(value: Any, key: str) -> int:
+    try:
+        number = int(value)
+    except (TypeError, ValueError):
+        raise ConfigError(key, f"expected a positive whole number, got {value!r}") from None
+    if number < 1 or number != float(value):
+        raise ConfigError(key, f"expected a positive whole number, got {value!r}")
+    return number
+
+
+def _normalize_kwargs(value: Any) -> Optional[dict]:
+    """None (no VecNormalize) or VecNormalize keyword arguments."""
+    if value is None or value is False:
+        return None
+    if value is True:
+        return {}
+    if isinstance(value, dict):
+        for key in value:
+            if key not in NORMALIZE_KEYS:
+                raise _unknown(f"normalize.{key}", [f"normalize.{k}" for k in NORMALIZE_KEYS], "normalize")
+        return dict(value)
+    raise ConfigError("normalize", f"expected true, false or a mapping, got {value!r}")
+
+
+def _schedule(value: Any, key: str):
+    """A number, or 'lin_<number>': linear from <number> to 0 over the run."""
+    if isinstance(value, str):
+        match = re.fullmatch(r"lin_([0-9.eE+-]+)", value.strip())
+        if not match:
+            raise ConfigError(key, f"expected a number or lin_<number>, got {value!r}")
+        start = float(match.group(1))
+        return lambda progress_remaining: progress_remaining * start
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(key, f"expected a number or lin_<number>, got {value!r}")
+    return float(value)
+
+
+def as_yaml_config(cfg: dict) -> dict:
+    """The flat YAML form of a validated config (what DIR/config.yaml holds)."""
+    out = {key: cfg[key] for key in RUN_KEYS if key in cfg}
+    out["normalize"] = False if cfg["normalize"] is None else (cfg["normalize"] or True)
+    out.update(cfg["hyperparams"])
+    return out
+
+
+def model_kwargs(cfg: dict) -> dict:
+    """Keyword arguments of the SB3 constructor from a validated config."""
+    import torch
+
+    kwargs = dict(cfg["hyperparams"])
+    for key in SCHEDULE_KEYS:
+        if key in kwargs:
+            kwargs[key] = _schedule(kwargs[key], key)
+    policy_kwargs = dict(cfg["policy_kwargs"])
+    if "activation_fn" in policy_kwargs:
+        policy_kwargs["activation_fn"] = {
+            "tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU, "leaky_relu": torch.nn.LeakyReLU,
+            "gelu": torch.nn.GELU, "silu": torch.nn.SiLU,
+        }[policy_kwargs["activation_fn"]]
+    if policy_kwargs:
+        kwargs["policy_kwargs"] = policy_kwargs
+    return kwargs
+
+
+# -- envs -----------------------------------------------------------------------------------
+
+def worker_env(env_id: str, **env_kwargs):
+    """Make one env; in a worker process, leave Ctrl-C and SIGTERM to the trainer."""
+    import multiprocessing
+
+    import gymnasium as gym
+
+    if multiprocessing.parent_process() is not None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    return gym.make(env_id, **env_kwargs)
+
+
+def check_env_kwargs(env_id: str, env_kwargs: dict):
+    """Build the env once in this process, so a bad kwarg fails here, naming the key."""
+    import gymnasium as gym
+
+    env = gym.make(env_id, **env_kwargs)
+    spaces = (env.observation_space, env.action_space)
+    env.close()
+    return spaces
+
+
+def make_training_env(cfg: dict):
+    from functools import partial
+
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    n = cfg["n_envs"]
+    vec_cls = SubprocVecEnv if n > 1 else DummyVecEnv
+    return make_vec_env(partial(worker_env, cfg["env"]), n_envs=n, seed=cfg["seed"],
+                        env_kwargs=cfg["env_kwargs"], vec_env_cls=vec_cls)
+
+
+# -- checkpoints ----------------------------------------------------------------------------
+
+@dataclass
+class Checkpoint:
+    steps: int
+    model: Path
+    replay_buffer: Path
+    vecnormalize: Path
+
+
+def checkpoint_files(ckpt_dir: Path, steps: int) -> Checkpoint:
+    return Checkpoint(
+        steps,
+        ckpt_dir / f"{CHECKPOINT_PREFIX}_{steps}_steps.zip",
+        ckpt_dir / f"{CHECKPOINT_PREFIX}_replay_buffer_{steps}_steps.pkl",
+        ckpt_dir / f"{CHECKPOINT_PREFIX}_vecnormalize_{steps}_steps.pkl",
+    )
+
+
+def list_checkpoints(ckpt_dir: Path) -> list[Checkpoint]:
+    """Checkpoints in DIR/checkpoints, newest (most steps) first."""
+    if not ckpt_dir.is_dir():
+        return []
+    steps = [int(m.group(1)) for p in ckpt_dir.iterdir() if (m := CHECKPOINT_RE.match(p.name))]
+    return [checkpoint_files(ckpt_dir, s) for s in sorted(steps, reverse=True)]
+
+
+def save_checkpoint(model, ckpt_dir: Path) -> Checkpoint:
+    """Replay buffer and VecNormalize first, the model last: a zip implies its companions."""
+    ckpt_dir.mkdir(parents=True, exist_ok=True)
+    ck = checkpoint_files(ckpt_dir, int(model.num_timesteps))
+    if getattr(model, "replay_buffer", None) is not None:
+        model.save_replay_buffer(ck.replay_buffer)
+    if model.get_vec_normalize_env() is not None:
+        model.get_vec_normalize_env().save(str(ck.vecnormalize))
+    model.save(ck.model)
+    return ck
+
+
+# -- callbacks ------------------------------------------------------------------------------
+
+def _callbacks(total: int, started_steps: int, stop_flags: dict, max_minutes: Optional[float]):
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    class Progress(BaseCallback):
+        """tqdm bar over env steps (SB3's own bar needs rich); a log line every minute
+        when stderr is not a terminal; stops on a signal or the wall-clock limit."""
+
+        def _on_training_start(self) -> None:
+            self.started = time.monotonic()
+            self.last_line = self.started
+            self.bar = tqdm(total=total, initial=min(self.model.num_timesteps, total), unit="step",
+                            desc=f"train {type(self.model).__name__}", file=sys.stderr, disable=None,
+                            dynamic_ncols=True, smoothing=0.05)
+
+        def _mean_reward(self) -> Optional[float]:
+            buf = self.model.ep_info_buffer
+            return sum(e["r"] for e in buf) / len(buf) if buf else None
+
+        def _on_step(self) -> bool:
+            done = min(self.model.num_timesteps, total)
+            self.bar.update(done - self.bar.n)
+            reward = self._mean_reward()
+            now = time.monotonic()
+            if reward is not None and self.n_calls % 10 == 0:
+                self.bar.set_postfix(reward=f"{reward:.3f}", refresh=False)
+            if self.bar.disable and now - self.last_line > 60:
+                self.last_line = now
+                mean = "-" if reward is None else f"{reward:.3f}"
+                print(f"train: {self.model.num_timesteps}/{total} steps, mean episode reward {mean}, "
+                      f"{(now - self.started) / 60:.1f} min", file=sys.stderr, flush=True)
+            if stop_flags.get("signal"):
+                return False
+            if max_minutes is not None and now - self.started > 60.0 * max_minutes:
+                stop_flags["time"] = True
+                return False
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return Progress()
+
+
+# -- train ----------------------------------------------------------------------------------
+
+@dataclass
+class TrainResult:
+    out_dir: Path
+    num_timesteps: int
+    resumed_from: Optional[int]
+    stopped: str  # "done", "time limit", "interrupted", "already done"
+    wall_s: float
+
+
+def load_run_config(out_dir: Path, algo: str) -> dict:
+    path = out_dir / "config.yaml"
+    if not path.is_file():
+        raise SpreadgymError(f"{out_dir}/checkpoints holds checkpoints but {path} is missing: cannot resume "
+                             "(use a fresh --out folder)")
+    raw = read_config(path)
+    saved = raw.get("algo")
+    if saved is not None and saved != algo:
+        raise SpreadgymError(f"{out_dir} holds a {saved} run; resume it with --algo {saved} or use a fresh --out")
+    return validate_config(algo, raw, str(path))
+
+
+def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, overrides: Optional[dict] = None,
+          env_id: Optional[str] = None, timesteps: Optional[int] = None, seed: Optional[int] = None,
+          max_minutes: Optional[float] = None, log=print) -> TrainResult:
+    started = time.monotonic()
+    algo = algo.lower()
+    cls = algo_class(algo)
+    out_dir = Path(out_dir)
+    ckpt_dir = out_dir / "checkpoints"
+    checkpoints = list_checkpoints(ckpt_dir)
+
+    if checkpoints:
+        cfg = load_run_config(out_dir, algo)
+        ignored = [name for name, v in (("--config", config_path), ("--set", overrides), ("--env", env_id),
+                                        ("--seed", seed)) if v]
+        if ignored:
+            log(f"resuming: {', '.join(ignored)} ignored, the run keeps {out_dir / 'config.yaml'}")
+    else:
+        path = Path(config_path) if config_path else default_config_path(algo)
+        raw = read_config(path)
+        if overrides:
+            raw = set_dotted(raw, overrides)
+        if env_id:
+            raw["env"] = env_id
+        if seed is not None:
+            raw["seed"] = int(seed)
+        cfg = validate_config(algo, raw, str(config_path or f"configs/agents/{algo}.yaml"))
+    if timesteps is not None:
+        cfg["n_timesteps"] = _positive_int(timesteps, "--timesteps")
+    if max_minutes is not None:
+        if not max_minutes > 0:
+            raise SpreadgymError(f"--max-minutes must be positive, got {max_minutes}")
+        cfg["max_minutes"] = float(max_minutes)
+
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+    spaces = check_env_kwargs(cfg["env"], cfg["env_kwargs"])  # bad env kwargs fail here, naming the key
+    kwargs = model_kwargs(cfg)
+    try:  # the constructor checks the hyperparameter values before any worker starts
+        cls(cfg["policy"], _spaces_env(*spaces), device="cpu", **kwargs)
+    except (TypeError, ValueError, AssertionError) as exc:
+        raise SpreadgymError(f"{algo} hyperparameters: {exc}") from None
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    total = cfg["n_timesteps"]
+    resumed_from = None
+    model = None
+    venv = make_training_env(cfg)
+    try:
+        if checkpoints:
+            model, venv, resumed_from = _resume(cls, cfg, checkpoints, venv, out_dir, log)
+        else:
+            if cfg["normalize"] is not None:
+                from stable_baselines3.common.vec_env import VecNormalize
+
+                venv = VecNormalize(venv, **cfg["normalize"])
+            model = cls(cfg["policy"], venv, device="cpu", seed=cfg["seed"], tensorboard_log=str(out_dir / "tb"),
+                        verbose=0, **kwargs)
+        _write_config(out_dir, cfg, model.num_timesteps, resumed_from, "running", time.monotonic() - started)
+        if model.num_timesteps >= total:
+            log(f"{out_dir} already holds {model.num_timesteps} >= {total} steps; nothing to train")
+            stopped = "already done"
+        else:
+            stopped = _learn(model, cfg, total, ckpt_dir, log)
+        final = save_checkpoint(model, ckpt_dir)
+        model.save(out_dir / "model.zip")
+        if model.get_vec_normalize_env() is not None:
+            model.get_vec_normalize_env().save(str(out_dir / "vecnormalize.pkl"))
+        wall = time.monotonic() - started
+        _write_config(out_dir, cfg, model.num_timesteps, resumed_from, stopped, wall)
+        log(f"checkpoint {final.model}")
+    finally:
+        venv.close()
+    if stopped == "interrupted":
+        log(f"interrupted at {model.num_timesteps} steps; checkpoint saved; run the same command to resume")
+        raise KeyboardInterrupt
+    return TrainResult(out_dir, int(model.num_timesteps), resumed_from, stopped, wall)
+
+
+def _spaces_env(obs_space, act_space):
+    """A stand-in env with the real spaces (for the constructor check: no simulation)."""
+    import gymnasium as gym
+
+    class Spaces(gym.Env):
+        observation_space = obs_space
+        action_space = act_space
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            return obs_space.sample(), {}
+
+        def step(self, action):
+            return obs_space.sample(), 0.0, True, False, {}
+
+    return Spaces()
+
+
+def _resume(cls, cfg, checkpoints, venv, out_dir, log):
+    """Load the newest complete checkpoint (falling back to older ones if a file is broken)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    errors = []
+    for ck in checkpoints:
+        if cfg["normalize"] is not None and not ck.vecnormalize.is_file():
+            errors.append(f"{ck.model.name}: no {ck.vecnormalize.name}")
+            continue
+        try:
+            env = VecNormalize.load(str(ck.vecnormalize), venv) if cfg["normalize"] is not None else venv
+            model = cls.load(ck.model, env=env, device="cpu", tensorboard_log=str(out_dir / "tb"))
+            if hasattr(model, "replay_buffer"):
+                if ck.replay_buffer.is_file():
+                    model.load_replay_buffer(ck.replay_buffer)
+                else:
+                    log(f"resuming without a replay buffer: {ck.replay_buffer.name} is missing")
+        except Exception as exc:  # a checkpoint cut short by a kill: try the previous one
+            errors.append(f"{ck.model.name}: {type(exc).__name__}: {exc}")
+            continue
+        for err in errors:
+            log(f"skipped checkpoint {err}")
+        log(f"resuming from {ck.model} ({model.num_timesteps} steps)")
+        return model, env, int(model.num_timesteps)
+    raise SpreadgymError(f"{out_dir}/checkpoints: no usable checkpoint ({'; '.join(errors)})")
+
+
+def _learn(model, cfg, total, ckpt_dir, log) -> str:
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+
+    flags: dict = {}
+    periodic = CheckpointCallback(save_freq=max(cfg["checkpoint_freq"] // cfg["n_envs"], 1),
+                                  save_path=str(ckpt_dir), name_prefix=CHECKPOINT_PREFIX,
+                                  save_replay_buffer=True, save_vecnormalize=True)
+    progress = _callbacks(total, model.num_timesteps, flags, cfg["max_minutes"])
+
+    def on_signal(signum, frame):
+        if flags.get("signal"):  # second Ctrl-C: stop now
+            raise KeyboardInterrupt
+        flags["signal"] = signum
+        print("\nstopping after this step to save a checkpoint (Ctrl-C again to abort)", file=sys.stderr)
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        model.learn(total_timesteps=total - model.num_timesteps, callback=CallbackList([periodic, progress]),
+                    reset_num_timesteps=False, tb_log_name=cfg["algo"], progress_bar=False)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    if flags.get("signal"):
+        return "interrupted"
+    if flags.get("time"):
+        log(f"stopped at the time limit of {cfg['max_minutes']:g} min ({model.num_timesteps} steps)")
+        return "time limit"
+    return "done"
+
+
+def _write_config(out_dir: Path, cfg: dict, steps: int, resumed_from, stopped: str, wall_s: float) -> None:
+    record = as_yaml_config(cfg)
+    record["trained"] = {"num_timesteps": int(steps), "resumed_from": resumed_from, "stopped": stopped,
+                         "wall_s_last_invocation": round(float(wall_s), 1)}
+    text = ("# written by `spreadgym train`: the config of this run (a valid --config file;\n"
+            "# the `trained` record is ignored when read back)\n") + yaml.safe_dump(record, sort_keys=False)
+    tmp = out_dir / "config.yaml.tmp"
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(out_dir / "config.yaml")
+
+
+# -- loading a saved policy -----------------------------------------------------------------
+
+@dataclass
+class SavedPolicy:
+    path: Path
+    algo: str
+    config: dict  # validated config of the run
+    model: Any
+    obs_rms: Any  # VecNormalize (for its observation statistics) or None
+
+    @property
+    def env_id(self) -> str:
+        return self.config["env"]
+
+    @property
+    def env_kwargs(self) -> dict:
+        return dict(self.config["env_kwargs"])
+
+    def act(self, obs):
+        import numpy as np
+
+        obs = np.asarray(obs, dtype=np.float32)
+        if self.obs_rms is not None:
+            obs = self.obs_rms.normalize_obs(obs)
+        action, _ = self.model.predict(obs, deterministic=True)
+        return action
+
+
+def load_policy(path) -> SavedPolicy:
+    """A policy saved by `train`: DIR/model.zip (or DIR, or a checkpoint zip), with the run's
+    config.yaml and VecNormalize statistics. Anything else is a SpreadgymError naming the path."""
+    import zipfile
+
+    path = Path(path)
+    given = path
+    if path.is_dir():
+        path = path / "model.zip"
+    if not path.is_file():
+        raise SpreadgymError(f"--model {given}: no such file (expected DIR/model.zip written by spreadgym train)")
+    if not zipfile.is_zipfile(path):
+        raise SpreadgymError(f"--model {given}: not a saved stable-baselines3 policy (not a zip file)")
+    with zipfile.ZipFile(path) as zf:
+        if "data" not in zf.namelist() or "policy.pth" not in zf.namelist():
+            raise SpreadgymError(f"--model {given}: not a saved stable-baselines3 policy (no data/policy.pth)")
+    match = CHECKPOINT_RE.match(path.name)
+    run_dir = path.parent.parent if match and path.parent.name == "checkpoints" else path.parent
+    config_path = run_dir / "config.yaml"
+    if not config_path.is_file():
+        raise SpreadgymError(f"--model {given}: {config_path} is missing (the run's config, written by train)")
+    raw = read_config(config_path)
+    algo = str(raw.get("algo", "")).lower()
+    if algo not in ALGOS:
+        raise SpreadgymError(f"--model {given}: {config_path} names no known algo ({raw.get('algo')!r})")
+    cfg = validate_config(algo, raw, str(config_path))
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+    try:
+        model = algo_class(algo).load(path, device="cpu")
+    except Exception as exc:
+        raise SpreadgymError(f"--model {given}: could not load a {algo} policy ({type(exc).__name__}: {exc})") from None
+    obs_rms = None
+    if cfg["normalize"] is not None:
+        stats = (checkpoint_files(path.parent, int(match.group(1))).vecnormalize if match
+                 else run_dir / "vecnormalize.pkl")
+        if not stats.is_file():
+            raise SpreadgymError(f"--model {given}: the run normalised observations but {stats} is missing")
+        with open(stats, "rb") as handle:
+            obs_rms = pickle.load(handle)
+        obs_rms.training = False
+        obs_rms.norm_reward = False
+    return SavedPolicy(path, algo, cfg, model, obs_rms)
