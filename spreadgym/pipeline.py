@@ -6,7 +6,6 @@ dict is the JSON of `spreadgym simulate --json`.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from typing import Callable, Optional
@@ -115,10 +114,7 @@ def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
     if not gone.any():
         return {"speed_mean_m_s": 0.0, "speed_std_m_s": 0.0, "spin_mean_rad_s": 0.0,
                 "angle_mean_deg": 0.0, "time_on_spinner_mean_s": 0.0}
-    pos, vel = departure.position_m[gone], departure.velocity_m_s[gone]
-    radial = pos / np.hypot(pos[:, 0], pos[:, 1])[:, None]
-    tangent = math.copysign(1.0, omega_rad_s) * np.stack([-radial[:, 1], radial[:, 0]], axis=1)
-    angle = np.degrees(np.arctan2(np.sum(vel * radial, axis=1), np.sum(vel * tangent, axis=1)))
+    angle = np.degrees(np.arctan2(*departure.radial_tangential_m_s(omega_rad_s)))
     speed = departure.speed_m_s[gone]
     return {
         "speed_mean_m_s": float(speed.mean()),

@@ -189,11 +189,7 @@ def departure_statistics(departure: Departure, omega_rad_s: float) -> dict:
                    "angle_mean_deg", "angle_std_deg", "radial_mean_m_s", "tangential_mean_m_s",
                    "time_on_spinner_mean_s")
         return {**out, **{k: 0.0 for k in nothing}}
-    pos, vel = departure.position_m[gone], departure.velocity_m_s[gone]
-    radial_dir = pos / np.hypot(pos[:, 0], pos[:, 1])[:, None]
-    tangent_dir = math.copysign(1.0, omega_rad_s) * np.stack([-radial_dir[:, 1], radial_dir[:, 0]], axis=1)
-    radial = np.sum(vel * radial_dir, axis=1)
-    tangential = np.sum(vel * tangent_dir, axis=1)
+    radial, tangential = departure.radial_tangential_m_s(omega_rad_s)
     angle = np.degrees(np.arctan2(radial, tangential))
     speed = departure.speed_m_s[gone]
     spin = departure.spin_rad_s[gone]

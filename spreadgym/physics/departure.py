@@ -43,5 +43,13 @@ class Departure:
     def speed_m_s(self) -> np.ndarray:
         return np.hypot(self.velocity_m_s[:, 0], self.velocity_m_s[:, 1])
 
+    def radial_tangential_m_s(self, omega_rad_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Outward radial and tangential (direction of rotation) velocity of the departed granules."""
+        gone = self.departed
+        pos, vel = self.position_m[gone], self.velocity_m_s[gone]
+        radial_dir = pos / np.hypot(pos[:, 0], pos[:, 1])[:, None]
+        tangent_dir = np.copysign(1.0, omega_rad_s) * np.stack([-radial_dir[:, 1], radial_dir[:, 0]], axis=1)
+        return np.sum(vel * radial_dir, axis=1), np.sum(vel * tangent_dir, axis=1)
+
     def outcome_counts(self) -> dict[str, int]:
         return {name: int(np.sum(self.outcome == code)) for code, name in enumerate(OUTCOMES)}
