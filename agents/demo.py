@@ -83,7 +83,7 @@ def _full_run(scene, label: str):
     """One run of the full model with a progress bar of the simulated spinner time."""
     from tqdm import tqdm
 
-    from spreadgym.pipeline import run_scene
+    from spreadgym.spread.pipeline import run_scene
 
     started = time.perf_counter()
     with tqdm(desc=label, unit="ms", file=sys.stderr, disable=None, leave=False,
@@ -105,7 +105,7 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
     from spreadgym.agents.baselines import cmaes_search
     from spreadgym.agents.evaluation import DESIGN_ENV, EvalContext, make_env, published_action
     from spreadgym.errors import SpreadgymError
-    from spreadgym.scene import load_scene, scene_with
+    from spreadgym.config.scene import load_scene, scene_with
 
     started = time.perf_counter()
     if budget < 1:
@@ -191,7 +191,7 @@ def _policy_column(path: Path, ctx, base, granules: int, steps: int, required: b
     from spreadgym.agents.evaluation import make_env
     from spreadgym.agents.training import load_policy
     from spreadgym.errors import SpreadgymError
-    from spreadgym.scene import scene_with
+    from spreadgym.config.scene import scene_with
 
     try:
         policy = load_policy(path)
@@ -251,7 +251,7 @@ def table_rows(columns: list[Column], target_m: float) -> list[tuple]:
 
 def write_demo(out: Path, columns: list[Column], target_m: float, budget: int, granules: int, wall: float) -> list:
     from spreadgym.agents.evaluation import write_csv
-    from spreadgym.plots import write_simulation_plots
+    from spreadgym.viz.plots import write_simulation_plots
     from spreadgym.report import format_table, print_json
 
     out.mkdir(parents=True, exist_ok=True)
@@ -285,7 +285,7 @@ def side_by_side(path: Path, columns: list[Column], target_m: float) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from spreadgym.plots import cv_vs_bout_width, transverse_pattern
+    from spreadgym.viz.plots import cv_vs_bout_width, transverse_pattern
 
     n = len(columns)
     fig = Figure(figsize=(5.6 * n, 8.4), dpi=100, layout="constrained")

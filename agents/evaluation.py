@@ -371,7 +371,7 @@ def pattern_grid(results: Sequence[tuple[str, Any]], path: Path, title: str = ""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from spreadgym.plots import transverse_pattern
+    from spreadgym.viz.plots import transverse_pattern
 
     n = len(results)
     cols = min(4, max(1, n))

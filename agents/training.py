@@ -81,13 +81,13 @@ def hyperparameter_names(algo: str) -> list[str]:
 # -- config ---------------------------------------------------------------------------------
 
 def default_config_path(algo: str) -> Path:
-    from spreadgym.resources import config_dir
+    from spreadgym.config.resources import config_dir
 
     return config_dir() / "agents" / f"{algo}.yaml"
 
 
 def read_config(path: Path) -> dict:
-    from spreadgym.resources import read_yaml
+    from spreadgym.config.resources import read_yaml
 
     path = Path(path)
     if not path.is_file():

@@ -24,7 +24,7 @@ from gymnasium import spaces
 
 from spreadgym.envs.config import SettingsConfig
 from spreadgym.errors import ConfigError
-from spreadgym.scene import Scene
+from spreadgym.config.scene import Scene
 
 
 @dataclass(frozen=True)

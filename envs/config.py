@@ -26,7 +26,7 @@ from typing import Any, Literal, Mapping, Optional
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from spreadgym.errors import ConfigError
-from spreadgym.resources import read_yaml, resolve_named
+from spreadgym.config.resources import read_yaml, resolve_named
 
 DESIGN = "spinner_design"
 TUNING = "spreader_tuning"

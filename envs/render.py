@@ -4,13 +4,13 @@ A frame has three panels:
 
 * the spinner (plan view, machine frame): disc, vanes, deflectors, granule paths over
   the disc when the model recorded them, and straight departure rays
-  (`spreadgym.plots.plan_view`);
+  (`spreadgym.viz.plots.plan_view`);
 * the field (plan view): straight lines from each granule's launch point to where it
   lands, for the first `render.trajectories` granules (in still air with the machine
   standing the path over the ground is exactly straight; with wind or forward speed
   this is a chord of it), and the row of trays across the track;
 * the tray test: single-pass tray masses and the overlapped pattern at the target
-  swath, with the CV (`spreadgym.plots.transverse_pattern`);
+  swath, with the CV (`spreadgym.viz.plots.transverse_pattern`);
 * a few lines of text: the job, the settings, CV, effective swath and reward.
 
 matplotlib is imported only when a frame is drawn, and frames are drawn on an Agg
@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from spreadgym.physics.geometry import vane_segments
-from spreadgym.scene import Scene
+from spreadgym.config.scene import Scene
 
 
 def draw_frame(
@@ -53,7 +53,7 @@ def draw_frame(
         _draw_field(ax_field, scene, None, 0)
         _draw_no_trays(ax_trays, scene)
     else:
-        from spreadgym import plots
+        from spreadgym.viz import plots
 
         plots.plan_view(ax_disc, result, max_tracks=15, max_rays=60, legend=False)
         ax_disc.set_title(f"spinner {scene.spinner.rpm:.0f} rpm", fontsize=8)

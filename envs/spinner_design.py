@@ -28,16 +28,16 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from spreadgym.contacts import resolve_contacts
+from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.envs import reward as rewards
 from spreadgym.envs.actions import Settings, SettingsMap, check_action
 from spreadgym.envs.config import DESIGN, DesignConfig, load_env_config
 from spreadgym.envs.render import HumanViewer, draw_frame
 from spreadgym.errors import ConfigError, MaterialError
-from spreadgym.materials import load_library
+from spreadgym.config.materials import load_library
 from spreadgym.physics.selection import choose_model
-from spreadgym.pipeline import SimulationResult, run_scene
-from spreadgym.scene import Scene, load_scene, scene_with
+from spreadgym.spread.pipeline import SimulationResult, run_scene
+from spreadgym.config.scene import Scene, load_scene, scene_with
 
 SEED_BOUND = 2**31 - 1
 

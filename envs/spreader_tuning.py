@@ -31,14 +31,14 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from spreadgym import pattern
+from spreadgym.spread import pattern
 from spreadgym.envs import reward as rewards
 from spreadgym.envs.actions import check_action
 from spreadgym.envs.config import TUNING, load_env_config
 from spreadgym.envs.render import HumanViewer, draw_frame
 from spreadgym.envs.spinner_design import SEED_BOUND, Context, Task, frame_lines, info_metrics
 from spreadgym.errors import ConfigError
-from spreadgym.scene import Scene
+from spreadgym.config.scene import Scene
 
 SUMMARY_NAMES = ["cv", "swath", "landed", "steps_left"]
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from spreadgym.contacts import resolve_contacts
-from spreadgym.granules import sample_granules
-from spreadgym.materials import load_library
+from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.physics.granules import sample_granules
+from spreadgym.config.materials import load_library
 
 
 @pytest.fixture(scope="session")

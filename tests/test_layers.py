@@ -36,8 +36,8 @@ def test_envs_import_nothing_from_agents():
 def test_core_runs_without_gymnasium_installed():
     code = (
         "import sys; sys.modules['gymnasium'] = None\n"
-        "from spreadgym.scene import load_scene\n"
-        "from spreadgym.pipeline import run_scene\n"
+        "from spreadgym.config.scene import load_scene\n"
+        "from spreadgym.spread.pipeline import run_scene\n"
         "m = run_scene(load_scene('paper', {'sim.granules': 50, 'feed.drop_height_m': 0.0,"
         " 'contact.vane_restitution': 0.0}), ci=False).metrics\n"
         "assert m['model'] == 'analytic' and 'gymnasium' not in [k for k, v in sys.modules.items() if v]\n"

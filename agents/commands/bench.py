@@ -13,8 +13,6 @@ from pathlib import Path
 
 from spreadgym.report import format_table
 
-NAME = "bench"
-HELP = "run the benchmarks (speed, speed against accuracy) and write CSV/PNG under --out"
 SECTIONS = ("spinner", "methods", "flight", "env", "cv-noise", "speed-accuracy", "stability")
 
 
@@ -33,7 +31,7 @@ def write_csv(rows: list[dict], path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from spreadgym import benchmarks, stability
+    from spreadgym.studies import benchmarks, stability
     from spreadgym.errors import SpreadgymError
 
     if args.repeats < 1:

@@ -8,8 +8,6 @@ import sys
 import time
 from pathlib import Path
 
-NAME = "compare"
-HELP = "compare a policy with random search, grid search and CMA-ES on the evaluation set"
 
 METHODS = ("published", "random", "grid", "cmaes")
 

@@ -7,10 +7,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-NAME = "demo"
-HELP = ("the main job: better spinner settings for a wider swath (CMA-ES on the fast model, "
-        "before/after with the full model), table and pictures")
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents import demo

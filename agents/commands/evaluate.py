@@ -6,9 +6,6 @@ import argparse
 import sys
 from pathlib import Path
 
-NAME = "evaluate"
-HELP = "run a trained policy (deterministic) on the evaluation set: table, JSON and pattern plots"
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", type=Path, required=True, metavar="DIR/model.zip",

@@ -6,9 +6,6 @@ import argparse
 import sys
 from pathlib import Path
 
-NAME = "train"
-HELP = "train a PPO or SAC policy on a spreadgym env (resumes from DIR's checkpoints)"
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--algo", required=True, choices=("ppo", "sac"), help="algorithm")
@@ -27,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from spreadgym.agents.training import train
-    from spreadgym.overrides import parse_assignments
+    from spreadgym.config.overrides import parse_assignments
 
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from spreadgym.granules import rotate
-from spreadgym.scene import Scene
+from spreadgym.physics.granules import rotate
+from spreadgym.config.scene import Scene
 
 
 def vane_segments(scene: Scene) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,7 @@ import math
 from dataclasses import dataclass
 
 from spreadgym.errors import ConfigError
-from spreadgym.scene import Scene
+from spreadgym.config.scene import Scene
 
 TUNNEL_SAFETY = 0.5
 OMEGA_DT_MAX = 0.005

@@ -14,7 +14,7 @@ departure speed, so it is used only when asked for.
 from __future__ import annotations
 
 from spreadgym.errors import ConfigError
-from spreadgym.scene import Scene
+from spreadgym.config.scene import Scene
 
 MODELS = ("auto", "analytic", "pymunk", "spring-damper")
 

@@ -1,0 +1,29 @@
+"""The one console entry (`spreadgym`): command names mapped to the modules that run them.
+
+Each command module defines `add_arguments(parser)` and `run(args) -> int`. The table
+names modules by string, and only the module of the command being run is imported, so
+the core's commands never import the envs or agents layers and `spreadgym materials`
+does not load torch.
+"""
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    "materials": ("spreadgym.cli.materials",
+                  "list fertilizers, surfaces and the measured fertilizer-surface pair properties"),
+    "calibrate": ("spreadgym.cli.calibrate",
+                  "spring-dashpot contact parameters from restitution, contact time and mass (Eqs. 8-10)"),
+    "simulate": ("spreadgym.cli.simulate",
+                 "simulate a scene: departure from the spinner, flight, tray pattern, CV and swath"),
+    "study": ("spreadgym.cli.study",
+              "rerun a published simulation study (paper: material, rpm, diameter; free vs locked rotation)"),
+    "train": ("spreadgym.agents.commands.train",
+              "train a PPO or SAC policy on a spreadgym env (resumes from DIR's checkpoints)"),
+    "evaluate": ("spreadgym.agents.commands.evaluate",
+                 "run a trained policy (deterministic) on the evaluation set: table, JSON and pattern plots"),
+    "compare": ("spreadgym.agents.commands.compare",
+                "compare a policy with random search, grid search and CMA-ES on the evaluation set"),
+    "demo": ("spreadgym.agents.commands.demo",
+             "the main job: better spinner settings for a wider swath (CMA-ES on the fast model, "
+             "before/after with the full model), table and pictures"),
+    "bench": ("spreadgym.agents.commands.bench",
+              "run the benchmarks (speed, speed against accuracy) and write CSV/PNG under --out"),
+}

@@ -1,0 +1,259 @@
+"""The `pymunk` spinner model: granules on a spinning disc with vanes, in plan view.
+
+The spinner is a kinematic pymunk body turning at omega and carrying the vanes as
+segments (radius = half the vane thickness), so contacts see the right surface
+velocity. Granules are circles; rotation `free` gives them a sphere's moment of
+inertia (2/5 m r^2, spin about the vertical axis: they can roll along a vane face),
+`locked` an infinite one (the point mass of the classic models). Granules never
+touch each other (one shape group). The height above the disc (drop, bounces) is the
+1-D model of `vertical.py`; the disc's Coulomb drag is applied as a body force through
+`pymunk.batch`, limited so it never reverses the relative velocity within a step.
+
+Granules are spread over several small independent spaces (interleaved by release
+phase): Chipmunk's broad phase then stays cheap although all granules start on one
+ring, and the numpy work is still done once per step for all of them.
+A fresh set of spaces is built for every run, so a seed reproduces a result bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Optional
+
+import numpy as np
+import pymunk
+import pymunk.batch as batch
+
+from spreadgym.physics.contacts import Contacts
+from spreadgym.physics.granules import GranuleBatch, rotate
+from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
+from spreadgym.physics.disc_friction import disc_surface_velocity, friction_velocity_change
+from spreadgym.physics.geometry import crossing_fraction, machine_frame_tracks, vane_segments
+from spreadgym.physics.numerics import choose_time_step, collision_bias_for
+from spreadgym.physics.vertical import GRAVITY_M_S2, VerticalState, free_fall_to
+from spreadgym.config.scene import Scene
+
+GRANULES_PER_SPACE = 200
+SOLVER_ITERATIONS = 10
+COLLISION_SLOP_M = 1e-5
+MAX_SPINNER_TIME_S = 3.0
+STUCK_SPEED_M_S = 1e-4
+
+# Collision categories: a granule touches the vanes only while it is lower than they are.
+_GRANULE, _VANE = 0b01, 0b10
+_BELOW_VANE_TOPS = pymunk.ShapeFilter(group=1, categories=_GRANULE, mask=_VANE)
+_ABOVE_VANE_TOPS = pymunk.ShapeFilter(group=1, categories=_GRANULE, mask=0)
+
+_STATE = (
+    batch.BodyFields.BODY_ID
+    | batch.BodyFields.POSITION
+    | batch.BodyFields.VELOCITY
+    | batch.BodyFields.ANGULAR_VELOCITY
+)
+
+
+class _SpinnerSpace:
+    """One pymunk space: the spinner body with its vanes and a share of the granules."""
+
+    def __init__(self, scene, contacts, granules, indices, dt, start_xy, below_vane_tops):
+        space = pymunk.Space()
+        space.iterations = SOLVER_ITERATIONS
+        space.collision_slop = COLLISION_SLOP_M
+        space.collision_bias = collision_bias_for(dt)
+        spinner = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        spinner.angular_velocity = scene.spinner.omega_rad_s
+        inner, outer = vane_segments(scene)
+        half_thickness = 0.5 * scene.vanes.thickness_m
+        vanes = [pymunk.Segment(spinner, tuple(a), tuple(b), half_thickness) for a, b in zip(inner, outer)]
+        for vane in vanes:
+            vane.elasticity = contacts.vane_restitution
+            vane.friction = contacts.vane_friction
+            vane.filter = pymunk.ShapeFilter(categories=_VANE, mask=_GRANULE)
+        space.add(spinner, *vanes)
+        locked = scene.granule.rotation == "locked"
+        self.shapes = {}
+        for i in indices:
+            mass, radius = float(granules.mass_kg[i]), float(granules.radius_m[i])
+            moment = math.inf if locked else 0.4 * mass * radius * radius
+            body = pymunk.Body(mass, moment)
+            body.position = tuple(start_xy[i])
+            shape = pymunk.Circle(body, radius)
+            shape.elasticity, shape.friction = 1.0, 1.0
+            shape.filter = _BELOW_VANE_TOPS if below_vane_tops[i] else _ABOVE_VANE_TOPS
+            space.add(body, shape)
+            self.shapes[body.id] = (body, shape)
+        self.space = space
+        self.buffer = batch.Buffer()
+        self._write_buffer = batch.Buffer()
+        # Body ids (sorted) and their granule indices; the spinner maps to -1.
+        ids = np.array([spinner.id] + list(self.shapes), dtype=np.uintp)
+        order = np.argsort(ids)
+        self._sorted_ids = ids[order]
+        self._index = np.concatenate([[-1], np.asarray(indices, dtype=np.int64)])[order]
+
+    def read(self) -> tuple[np.ndarray, np.ndarray]:
+        """Granule indices of the rows (spinner row = -1) and the (rows, 5) state."""
+        self.buffer.clear()
+        batch.get_space_bodies(self.space, _STATE, self.buffer)
+        ids = np.frombuffer(self.buffer.int_buf(), dtype=np.uintp)
+        rows = self._index[np.searchsorted(self._sorted_ids, ids)]
+        return rows, np.frombuffer(self.buffer.float_buf(), dtype=np.float64).reshape(-1, 5)
+
+    def write_forces(self, forces: np.ndarray) -> None:
+        """Set the force of every row (rows in the order of the last read)."""
+        self._forces = np.ascontiguousarray(forces, dtype=np.float64).ravel()
+        self._write_buffer.set_float_buf(self._forces)
+        batch.set_space_bodies(self.space, batch.BodyFields.FORCE, self._write_buffer)
+
+    @property
+    def empty(self) -> bool:
+        return not self.shapes
+
+    def set_below_vane_tops(self, body_ids: np.ndarray, below: np.ndarray) -> None:
+        """Let granules that fell below the vane tops meet the vanes (and the reverse)."""
+        for body_id, is_below in zip(body_ids, below):
+            self.shapes[int(body_id)][1].filter = _BELOW_VANE_TOPS if is_below else _ABOVE_VANE_TOPS
+
+    def remove(self, body_ids: np.ndarray) -> None:
+        objects = []
+        for body_id in body_ids:
+            objects.extend(self.shapes.pop(int(body_id)))
+        if objects:
+            self.space.remove(*objects)
+
+
+def simulate_pymunk(
+    scene: Scene,
+    granules: GranuleBatch,
+    contacts: Contacts,
+    progress: Optional[Callable[[float], None]] = None,
+    disc_friction_guard: bool = True,
+    track_count: int = 0,
+) -> Departure:
+    """Run every granule from release to the disc edge; return their departure states.
+
+    `track_count` granules (the first ones) also have their paths recorded for plots.
+    """
+    omega = scene.spinner.omega_rad_s
+    radius = scene.spinner.radius_m
+    choice = choose_time_step(scene, float(granules.radius_m.min()))
+    dt = choice.dt_s
+    n = granules.count
+    # Above the vane tops a granule only falls: nothing touches it. The run starts when
+    # it reaches them, with the spinner turned on by omega * t_fall (see granules.py).
+    vane_top = scene.vanes.height_m
+    t_fall, vz_fall = free_fall_to(vane_top, scene.feed.drop_height_m)
+    spinner_angle = granules.phase_rad + omega * t_fall
+    start = rotate(granules.release_xy_m, -spinner_angle)
+    vertical = VerticalState(min(scene.feed.drop_height_m, vane_top), n, contacts.disc_restitution, dt, vz_fall)
+    below_vane_tops = vertical.z < vane_top
+
+    n_spaces = max(1, math.ceil(n / GRANULES_PER_SPACE))
+    spaces = [
+        _SpinnerSpace(scene, contacts, granules, np.arange(k, n, n_spaces), dt, start, below_vane_tops)
+        for k in range(n_spaces)
+    ]
+
+    position, velocity, spin = start.copy(), np.zeros((n, 2)), np.zeros(n)
+    out_position, out_velocity = start.copy(), np.zeros((n, 2))
+    out_spin, out_height, out_vz, out_time = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+    outcome = np.full(n, RETAINED_TIMEOUT, dtype=np.int8)
+    active = np.ones(n, dtype=bool)
+    stuck_accel = contacts.disc_friction * GRAVITY_M_S2
+
+    steps = int(math.ceil(MAX_SPINNER_TIME_S / dt))
+    tracked = np.arange(min(track_count, n))
+    track_points = []
+    t = 0.0
+    for step in range(steps + 1):
+        t = step * dt
+        reads = [s.read() for s in spaces]
+        rows = np.concatenate([r for r, _ in reads])
+        state = np.concatenate([d for _, d in reads])
+        granule_rows = rows >= 0
+        idx = rows[granule_rows]
+        new_pos, new_vel, new_spin = state[granule_rows, 0:2], state[granule_rows, 2:4], state[granule_rows, 4]
+
+        # Departure: the centre crossed the disc radius during the last step.
+        r_new = np.hypot(new_pos[:, 0], new_pos[:, 1])
+        leaving = r_new >= radius
+        if leaving.any():
+            li = idx[leaving]
+            frac = crossing_fraction(position[li], new_pos[leaving], radius)
+            out_position[li] = position[li] + frac[:, None] * (new_pos[leaving] - position[li])
+            out_velocity[li] = velocity[li] + frac[:, None] * (new_vel[leaving] - velocity[li])
+            out_spin[li] = spin[li] + frac * (new_spin[leaving] - spin[li])
+            out_height[li], out_vz[li] = vertical.at_fraction(li, frac)
+            out_time[li] = t - (1.0 - frac) * dt
+            outcome[li] = DEPARTED
+
+        # Stuck: resting, carried along with the disc (to within the drift one step of
+        # centripetal motion leaves), and the centrifugal pull below what static disc
+        # friction holds.
+        rel = new_vel - disc_surface_velocity(new_pos, omega)
+        pull = omega * omega * r_new
+        stuck = (
+            ~leaving
+            & vertical.resting[idx]
+            & (np.hypot(rel[:, 0], rel[:, 1]) < STUCK_SPEED_M_S + 2.0 * pull * dt)
+            & (pull < stuck_accel)
+        )
+        if stuck.any():
+            outcome[idx[stuck]] = RETAINED_STUCK
+        finished = idx[leaving | stuck]
+        active[finished] = False
+        position[idx], velocity[idx], spin[idx] = new_pos, new_vel, new_spin
+        if tracked.size:
+            track_points.append(np.where(active[tracked, None], position[tracked], np.nan))
+        if not active.any() or step == steps:
+            break
+
+        normal_impulse = vertical.step()
+        dv = friction_velocity_change(
+            new_pos, new_vel, omega, contacts.disc_friction, normal_impulse[idx], disc_friction_guard
+        )
+        forces = np.zeros((rows.size, 2))
+        forces[granule_rows] = dv * (granules.mass_kg[idx] / dt)[:, None]
+        now_below = vertical.z < vane_top
+        offset = 0
+        for space, (space_rows, _) in zip(spaces, reads):
+            count = space_rows.size
+            space.write_forces(forces[offset : offset + count])
+            offset += count
+            is_granule = space_rows >= 0
+            ids = np.frombuffer(space.buffer.int_buf(), dtype=np.uintp)
+            rows_index = np.where(is_granule, space_rows, 0)
+            gone = is_granule & ~active[rows_index]
+            crossed = is_granule & ~gone & (now_below[rows_index] != below_vane_tops[rows_index])
+            if crossed.any():
+                space.set_below_vane_tops(ids[crossed], now_below[space_rows[crossed]])
+            if gone.any():
+                space.remove(ids[gone])
+        below_vane_tops = now_below
+        spaces = [space for space in spaces if not space.empty]
+        for space in spaces:
+            space.space.step(dt)
+        if progress is not None:
+            progress(t)
+
+    # Retained granules keep their last state.
+    tracks = machine_frame_tracks(track_points, out_position[tracked], spinner_angle[tracked])
+    kept = outcome != DEPARTED
+    out_position[kept], out_velocity[kept], out_spin[kept] = position[kept], velocity[kept], spin[kept]
+    out_height[kept], out_vz[kept], out_time[kept] = vertical.z[kept], vertical.vz[kept], t
+    return Departure(
+        position_m=rotate(out_position, spinner_angle),
+        velocity_m_s=rotate(out_velocity, spinner_angle),
+        spin_rad_s=out_spin,
+        height_m=out_height,
+        vertical_velocity_m_s=out_vz,
+        time_s=out_time + t_fall,
+        outcome=outcome,
+        model="pymunk",
+        dt_s=dt,
+        notes=[
+            f"time step {dt:.3g} s: {choice.reason}",
+            f"free fall above the vane tops solved exactly ({t_fall * 1e3:.1f} ms)",
+        ],
+        tracks=tracks,
+    )

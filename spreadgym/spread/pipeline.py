@@ -1,0 +1,160 @@
+"""The whole chain for one scene: spinner -> deflectors -> flight -> tray pattern -> metrics.
+
+`run_scene` is what `spreadgym simulate` and the environments call. Its `metrics`
+dict is the JSON of `spreadgym simulate --json`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from spreadgym.spread import flight as flight_model
+from spreadgym.spread import pattern
+from spreadgym.physics.contacts import Contacts, resolve_contacts
+from spreadgym.physics.granules import GranuleBatch, sample_granules
+from spreadgym.config.materials import MaterialLibrary, load_library
+from spreadgym.physics.analytic.spinner import simulate_analytic
+from spreadgym.physics.analytic.deflector_rays import deflect
+from spreadgym.physics.departure import Departure
+from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk
+from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
+from spreadgym.physics.selection import choose_model
+from spreadgym.physics.stepped.spring_damper import simulate_spring_damper
+from spreadgym.config.scene import Scene
+
+CI_LEVEL = 0.95
+CI_RESAMPLES = 200
+
+
+@dataclass
+class SimulationResult:
+    scene: Scene
+    granules: GranuleBatch
+    departure: Departure  # state at the disc edge
+    launch: Departure  # state where the flight starts (after the deflector zone)
+    landing: flight_model.Landing
+    trays: pattern.Trays
+    metrics: dict
+
+
+def run_spinner(
+    scene: Scene,
+    granules: GranuleBatch,
+    contacts: Contacts,
+    model: str,
+    progress: Optional[Callable[[float], None]] = None,
+    tracks: int = 0,
+) -> Departure:
+    """Departure states from the chosen spinner model (`tracks` paths kept for plots)."""
+    if model == "analytic":
+        return simulate_analytic(scene, granules, contacts)
+    if model == "pymunk":
+        return simulate_pymunk(scene, granules, contacts, progress=progress, track_count=tracks)
+    if model == "spring-damper":
+        return simulate_spring_damper(scene, granules, contacts, progress=progress, track_count=tracks)
+    raise AssertionError(f"model {model!r} has no runner")  # choose_model validated it
+
+
+def run_scene(
+    scene: Scene,
+    model: str = "auto",
+    library: Optional[MaterialLibrary] = None,
+    progress: Optional[Callable[[float], None]] = None,
+    ci: bool = True,
+    tracks: int = 0,
+) -> SimulationResult:
+    """Simulate `scene` end to end with a fresh random generator seeded by sim.seed.
+
+    `progress(t)` is called with the simulated spinner time (s); `ci` adds the bootstrap
+    interval of the CV; `tracks` keeps that many granule paths for pictures.
+    """
+    started = time.perf_counter()
+    library = library or load_library()
+    contacts = resolve_contacts(scene, library)
+    chosen, reason = choose_model(scene, model)
+    fertilizer = library.fertilizer(scene.fertilizer)
+    rng = np.random.default_rng(scene.sim.seed)
+    granules = sample_granules(scene, fertilizer, rng)
+
+    departure = run_spinner(scene, granules, contacts, chosen, progress, tracks)
+    if chosen == "analytic":  # exact rays; the stepped models keep plates in pymunk
+        launch = deflect(departure, scene.deflectors, contacts.deflectors, granules.radius_m, scene.granule.rotation)
+    else:
+        launch = deflect_pymunk(
+            departure, scene.deflectors, contacts.deflectors, granules.radius_m, granules.mass_kg,
+            scene.granule.rotation,
+        )
+    flying = launch.departed
+    velocity3 = np.column_stack([launch.velocity_m_s[flying], launch.vertical_velocity_m_s[flying]])
+    height = np.maximum(scene.spinner.height_m + launch.height_m[flying], 0.0)
+    landing = flight_model.fly(
+        launch.position_m[flying], height, velocity3, granules.diameter_m[flying],
+        granules.density_kg_m3, scene.flight,
+    )
+    landed_mass = granules.mass_kg[flying]
+    p = scene.pattern
+    trays = pattern.collect(landing.position_m[:, 0], landed_mass, p.tray_width_m,
+                            min_half_width_m=p.target_swath_m)
+    metrics = _metrics(scene, chosen, reason, granules, departure, launch, trays, landing, landed_mass, ci, rng)
+    metrics["wall_s"] = time.perf_counter() - started
+    return SimulationResult(scene, granules, departure, launch, landing, trays, metrics)
+
+
+def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
+    """Means over departed granules: speed, spin, angle from the tangent, time on the spinner.
+
+    The departure angle is measured from the disc's tangent at the departure point
+    (direction of rotation) towards the outward radial: 0 deg tangential, 90 deg radial.
+    """
+    gone = departure.departed
+    if not gone.any():
+        return {"speed_mean_m_s": 0.0, "speed_std_m_s": 0.0, "spin_mean_rad_s": 0.0,
+                "angle_mean_deg": 0.0, "time_on_spinner_mean_s": 0.0}
+    angle = np.degrees(np.arctan2(*departure.radial_tangential_m_s(omega_rad_s)))
+    speed = departure.speed_m_s[gone]
+    return {
+        "speed_mean_m_s": float(speed.mean()),
+        "speed_std_m_s": float(speed.std(ddof=1)) if speed.size > 1 else 0.0,
+        "spin_mean_rad_s": float(departure.spin_rad_s[gone].mean()),
+        "angle_mean_deg": float(angle.mean()),
+        "time_on_spinner_mean_s": float(departure.time_s[gone].mean()),
+    }
+
+
+def _metrics(scene, model, reason, granules, departure, launch, trays, landing, landed_mass, ci, rng) -> dict:
+    p = scene.pattern
+    released = float(granules.mass_kg.sum())
+    landed = float(landed_mass.sum())
+    retained = float(granules.mass_kg[~departure.departed].sum())
+    has_mass = landed > 0.0
+    cv = pattern.cv_percent(trays, p.target_swath_m, p.driving) if has_mass else None
+    interval = None
+    if has_mass and ci:
+        interval = list(pattern.cv_confidence_interval(
+            landing.position_m[:, 0], landed_mass, p.tray_width_m, p.target_swath_m, p.driving,
+            level=CI_LEVEL, resamples=CI_RESAMPLES, rng=rng,
+        ))
+    widths, cvs = pattern.cv_curve(trays, p.driving) if has_mass else (np.zeros(0), np.zeros(0))
+    return {
+        "model": model,
+        "model_reason": reason,
+        "dt_s": departure.dt_s,
+        "granules": granules.count,
+        "outcomes": departure.outcome_counts(),
+        "departure": departure_summary(departure, scene.spinner.omega_rad_s),
+        "target_swath_m": p.target_swath_m,
+        "driving": p.driving,
+        "tray_width_m": p.tray_width_m,
+        "cv_threshold_percent": p.cv_threshold_percent,
+        "cv_percent_at_target": cv,
+        "cv_ci_percent": interval,
+        "effective_swath_m": pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent) if has_mass else 0.0,
+        "cv_curve": {"bout_width_m": widths, "cv_percent": cvs},
+        "trays": {"center_m": trays.center_m, "mass_kg": trays.mass_kg},
+        "mass": {"released_kg": released, "landed_kg": landed, "retained_kg": retained},
+        "notes": list(launch.notes),
+    }

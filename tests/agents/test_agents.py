@@ -1,0 +1,274 @@
+"""Agents layer: evaluation set and accounting, baselines, train/evaluate/compare/demo commands.
+
+Tiny budgets throughout (100-300 granules, a few dozen simulations, 64-96 training
+steps) so the whole file stays well under a minute.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from spreadgym.agents import baselines as bl
+from spreadgym.agents import evaluation as ev
+from spreadgym.cli.main import main
+
+GRANULES = 100
+TINY_TRAIN = ["--set", "n_envs=1", "--set", f"env_kwargs.granules={GRANULES}", "--set", "checkpoint_freq=32",
+              "--set", "n_steps=32", "--set", "batch_size=32", "--set", "n_epochs=2"]
+
+
+def run_cli(capsys, argv):
+    code = main(argv)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.fixture(scope="module")
+def design_env():
+    return ev.make_env(ev.DESIGN_ENV, {"granules": GRANULES})
+
+
+# -- evaluation set and accounting -----------------------------------------------------------
+
+def test_evaluation_set_is_the_papers_fertilizers_by_swaths():
+    jobs = ev.evaluation_set()
+    assert len(jobs) == len(ev.EVAL_FERTILIZERS) * len(ev.EVAL_SWATHS_M) == 12
+    assert {j.fertilizer for j in jobs} == {"mixture-17-21-17", "compound-10-16-10", "pellet"}
+    assert sorted({j.target_swath_m for j in jobs}) == [2.0, 3.0, 4.0, 5.0]
+    seeds = [j.search_seed for j in jobs] + [j.score_seed(e) for j in jobs for e in range(3)]
+    assert len(set(seeds)) == len(seeds)  # searches never see a scoring sample
+
+
+def test_every_step_is_one_simulation(design_env):
+    env = design_env
+    ctx = ev.evaluation_set(["pellet"], [3.0])[0]
+    start = env.simulations
+    env.reset(seed=ctx.search_seed, options=ctx.options())
+    assert env.simulations == start  # a SpinnerDesign reset runs nothing
+    for _ in range(3):
+        env.step(np.zeros(2))
+    assert env.simulations == start + 3
+    row = ev.score_action(env, ctx, np.zeros(2), "x", search_simulations=7)
+    assert (row.search_simulations, row.scoring_simulations, row.simulations) == (7, 1, 8)
+    assert env.simulations == start + 4
+
+
+def test_tuning_reset_counts_as_a_simulation():
+    env = ev.make_env(ev.TUNING_ENV, {"granules": 50, "max_steps": 2})
+    env.reset(seed=0)
+    env.step(np.zeros(2))
+    assert env.simulations == 2
+
+
+@pytest.mark.parametrize("budget", [1, 5, 7, 13, 60])
+def test_cmaes_respects_the_budget_exactly(budget):
+    calls = []
+
+    def sphere(x):
+        calls.append(np.array(x))
+        return -float(np.sum((x - 0.3) ** 2))
+
+    result = bl.cmaes_search(sphere, 2, budget, seed=1)
+    assert len(calls) == result.evaluations == budget
+    assert all(np.all(np.abs(x) <= 1.0) for x in calls)
+    if budget >= 60:
+        assert np.allclose(result.best_x, 0.3, atol=0.1)
+
+
+def test_grid_and_random_budgets():
+    assert bl.grid_points(2, 200).shape == (196, 2)
+    assert bl.grid_points(2, 3).shape == (1, 2)
+    res = bl.random_search(lambda x: -abs(x[0]), 2, 17, seed=3)
+    assert res.evaluations == 17
+    again = bl.random_search(lambda x: -abs(x[0]), 2, 17, seed=3)
+    assert np.array_equal(res.best_x, again.best_x)
+
+
+def test_baselines_improve_over_the_published_settings():
+    env = ev.make_env(ev.DESIGN_ENV, {"granules": 600})  # fewer: the searches fit the noise of their sample
+    ctx = ev.evaluation_set(["compound-10-16-10"], [5.0])[0]
+    published = bl.run_baseline(env, ctx, "published")[0]
+    assert published.settings["rpm"] == pytest.approx(500.0) and published.simulations == 1
+    for method in ("random", "grid", "cmaes"):
+        before = env.simulations
+        row = bl.run_baseline(env, ctx, method, budget=16, seed=0)[0]
+        assert env.simulations - before == row.simulations == 17  # 16 to search + 1 to score
+        assert row.search_simulations == 16
+        assert row.reward > published.reward, method
+        assert row.cv_percent < published.cv_percent, method
+
+
+# -- train, evaluate, resume, compare ----------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ppo_run")
+    code = main(["train", "--algo", "ppo", "--timesteps", "64", *TINY_TRAIN, "--out", str(out)])
+    assert code == 0
+    return out
+
+
+def test_train_writes_model_config_checkpoints_and_logs(trained):
+    assert (trained / "model.zip").is_file()
+    config = yaml.safe_load((trained / "config.yaml").read_text())
+    assert config["algo"] == "ppo" and config["env"] == "spreadgym:SpinnerDesign-v0"
+    assert config["env_kwargs"] == {"granules": GRANULES}
+    assert config["n_timesteps"] == 64 and config["seed"] == 0
+    assert config["learning_rate"] > 0 and config["n_steps"] == 32
+    assert config["trained"]["num_timesteps"] == 64
+    assert sorted(p.name for p in (trained / "checkpoints").glob("*.zip")) == [
+        "rl_model_32_steps.zip", "rl_model_64_steps.zip"]
+    assert any((trained / "tb").rglob("events.out.tfevents*"))
+
+
+def test_evaluate_round_trip_json(trained, capsys, tmp_path):
+    code, out, err = run_cli(capsys, ["evaluate", "--model", str(trained / "model.zip"), "--granules", str(GRANULES),
+                                      "--fertilizers", "pellet", "--swaths", "2", "4", "--json",
+                                      "--out", str(tmp_path)])
+    assert code == 0, err
+    data = json.loads(out)
+    assert len(data["rows"]) == 2
+    for row in data["rows"]:
+        assert {"context", "settings", "cv_percent", "effective_swath_m", "reward"} <= set(row)
+        assert row["context"]["fertilizer"] == "pellet"
+        assert 200 <= row["settings"]["rpm"] <= 1100
+        assert -2.5 <= row["reward"] <= 0
+        assert row["search_simulations"] == 0 and row["scoring_simulations"] == 1
+    assert {"eval.csv", "eval.md", "eval.json", "patterns.png"} <= {p.name for p in tmp_path.iterdir()}
+
+
+def test_resume_continues_from_the_newest_checkpoint(trained, capsys, tmp_path):
+    from spreadgym.agents.training import load_policy
+
+    run = tmp_path / "run"
+    import shutil
+
+    shutil.copytree(trained, run)
+    code, out, err = run_cli(capsys, ["train", "--algo", "ppo", "--timesteps", "96", "--out", str(run)])
+    assert code == 0, err
+    assert "resuming from" in err and "rl_model_64_steps.zip" in err
+    config = yaml.safe_load((run / "config.yaml").read_text())
+    assert config["trained"]["resumed_from"] == 64 and config["trained"]["num_timesteps"] == 96
+    assert config["env_kwargs"] == {"granules": GRANULES}  # the saved config, not the shipped one
+    names = {p.name for p in (run / "checkpoints").glob("*.zip")}
+    assert {"rl_model_32_steps.zip", "rl_model_64_steps.zip", "rl_model_96_steps.zip"} <= names
+    assert load_policy(run / "model.zip").model.num_timesteps == 96
+
+
+def test_sac_resume_keeps_the_replay_buffer(capsys, tmp_path):
+    from spreadgym.agents.training import load_policy
+
+    sac = ["--set", "n_envs=1", "--set", f"env_kwargs.granules={GRANULES}", "--set", "checkpoint_freq=1000",
+           "--set", "learning_starts=16", "--set", "batch_size=16", "--set", "gradient_steps=1"]
+    code, _, err = run_cli(capsys, ["train", "--algo", "sac", "--timesteps", "32", *sac, "--out", str(tmp_path)])
+    assert code == 0, err
+    assert (tmp_path / "checkpoints" / "rl_model_replay_buffer_32_steps.pkl").is_file()
+    code, _, err = run_cli(capsys, ["train", "--algo", "sac", "--timesteps", "48", "--out", str(tmp_path)])
+    assert code == 0, err
+    assert "resuming from" in err and "without a replay buffer" not in err
+    from stable_baselines3 import SAC
+
+    model = SAC.load(tmp_path / "checkpoints" / "rl_model_48_steps.zip")
+    model.load_replay_buffer(tmp_path / "checkpoints" / "rl_model_replay_buffer_48_steps.pkl")
+    assert model.replay_buffer.size() == 48  # 32 from the first run + 16 new
+    assert load_policy(tmp_path).algo == "sac"
+
+
+def test_compare_counts_simulations(trained, capsys, tmp_path):
+    budget = 6
+    code, out, err = run_cli(capsys, ["compare", "--model", str(trained / "model.zip"), "--budget", str(budget),
+                                      "--granules", str(GRANULES), "--fertilizers", "compound-10-16-10",
+                                      "--swaths", "4", "--json", "--out", str(tmp_path)])
+    assert code == 0, err
+    data = json.loads(out)
+    table = {row["key"]: row for row in data["table"]}
+    assert list(table) == ["ppo", "published", "random", "grid", "cmaes"]
+    assert table["ppo"]["search_simulations"] == 0 and table["ppo"]["simulations"] == 1
+    assert table["published"]["simulations"] == 1
+    assert table["random"]["search_simulations"] == budget and table["random"]["simulations"] == budget + 1
+    assert table["cmaes"]["search_simulations"] == budget
+    assert table["grid"]["search_simulations"] == 4  # 2 x 2 grid within 6
+    for row in data["table"]:
+        assert {"cv_percent", "effective_swath_m", "reward", "simulations", "wall_s"} <= set(row)
+    assert {"compare.csv", "compare.md", "compare.json", "compare.png"} <= {p.name for p in tmp_path.iterdir()}
+    assert "CMA-ES" in (tmp_path / "compare.md").read_text()
+
+
+# -- bad input ---------------------------------------------------------------------------------
+
+def test_unknown_algorithm_exits_2(capsys, tmp_path):
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "--algo", "dqn", "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "dqn" in capsys.readouterr().err
+
+
+def test_unknown_env_id_exits_2(capsys, tmp_path):
+    code, _, err = run_cli(capsys, ["train", "--algo", "ppo", "--env", "spreadgym:Nope-v0", "--out", str(tmp_path)])
+    assert code == 2 and "spreadgym:Nope-v0" in err and "Traceback" not in err
+
+
+def test_unknown_config_key_exits_2(capsys, tmp_path):
+    from spreadgym.agents.training import default_config_path
+
+    raw = yaml.safe_load(default_config_path("ppo").read_text())
+    raw["learning_rat"] = raw.pop("learning_rate")
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    code, _, err = run_cli(capsys, ["train", "--algo", "ppo", "--config", str(path), "--out", str(tmp_path / "o")])
+    assert code == 2 and "learning_rat" in err and "learning_rate" in err
+    code, _, err = run_cli(capsys, ["train", "--algo", "ppo", "--set", "env_kwargs.granulez=5",
+                                    "--out", str(tmp_path / "o")])
+    assert code == 2 and "granulez" in err
+    assert not (tmp_path / "o" / "checkpoints").exists()
+
+
+@pytest.mark.parametrize("kind", ["missing", "text", "zip"])
+def test_model_that_is_not_a_policy_exits_2(capsys, tmp_path, kind):
+    import zipfile
+
+    path = tmp_path / "model.zip"
+    if kind == "text":
+        path.write_text("not a model")
+    elif kind == "zip":
+        with zipfile.ZipFile(path, "w") as zf:
+            zf.writestr("hello.txt", "hi")
+    for command in (["evaluate", "--model", str(path)], ["compare", "--model", str(path)]):
+        code, _, err = run_cli(capsys, command)
+        assert code == 2 and str(path) in err and "Traceback" not in err
+
+
+# -- demo --------------------------------------------------------------------------------------
+
+def test_demo_end_to_end(capsys, tmp_path):
+    code, out, err = run_cli(capsys, ["demo", "--budget", "20", "--granules", "300", "--no-policy",
+                                      "--out", str(tmp_path)])
+    assert code == 0, err
+    assert "[1/3]" in err and "analytic" in err and "pymunk" in err
+    data = json.loads((tmp_path / "before_after.json").read_text())
+    before, after = data["columns"]
+    assert before["rpm"] == pytest.approx(500.0) and before["pitch_deg"] == 0.0
+    assert before["model"] == after["model"] == "pymunk"
+    assert after["search_simulations"] == 20
+    assert after["cv_percent_at_target"] < before["cv_percent_at_target"]
+    for name in ("before_after.png", "before_after.csv", "before_after.md", "published/pattern.png",
+                 "cmaes/cv_curve.png"):
+        assert (tmp_path / name).is_file(), name
+    assert str(tmp_path) in out
+
+
+def test_closed_stdout_exits_quietly():
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from spreadgym.cli.main import main; "
+                             "sys.exit(main(['materials']))"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader is gone before the command writes
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141
+    assert "Traceback" not in err and "BrokenPipe" not in err

@@ -1,0 +1,34 @@
+"""`auto` picks the cheapest exact-enough model; analytic and pymunk agree where both serve."""
+
+import pytest
+
+from spreadgym.errors import ConfigError
+from spreadgym.physics.selection import choose_model
+from spreadgym.spread.pipeline import run_scene
+from spreadgym.config.scene import load_scene
+
+
+def test_auto_picks_analytic_only_where_it_is_exact_enough():
+    assert choose_model(load_scene("paper"))[0] == "pymunk"  # drop of 50 mm: bounces
+    no_drop = {"feed.drop_height_m": 0.0}
+    assert choose_model(load_scene("paper", no_drop))[0] == "analytic"
+    assert choose_model(load_scene("paper", {**no_drop, "granule.rotation": "locked"}))[0] == "analytic"
+    model, reason = choose_model(load_scene("paper"), "pymunk")
+    assert (model, reason) == ("pymunk", "requested")
+    with pytest.raises(ConfigError, match="model: unknown model 'dem'"):
+        choose_model(load_scene("paper"), "dem")
+
+
+@pytest.mark.parametrize("overrides", [
+    {"granule.rotation": "locked"},
+    {"granule.rotation": "free", "contact.vane_restitution": 0.0},
+    {"granule.rotation": "locked", "spinner.rpm": 900, "vanes.pitch_deg": -15.0},
+    {"granule.rotation": "free", "spinner.rpm": 1100, "vanes.pitch_deg": 10.0},
+    {"granule.rotation": "locked", "spinner.radius_m": 0.3, "spinner.rpm": 700},
+])
+def test_analytic_and_pymunk_agree_on_departure_speed_within_half_a_percent(overrides):
+    scene = load_scene("paper", {"feed.drop_height_m": 0.0, "sim.granules": 150, **overrides})
+    analytic = run_scene(scene, model="analytic", ci=False).metrics["departure"]
+    pymunk = run_scene(scene, model="pymunk", ci=False).metrics["departure"]
+    assert analytic["speed_mean_m_s"] == pytest.approx(pymunk["speed_mean_m_s"], rel=0.005)
+    assert analytic["angle_mean_deg"] == pytest.approx(pymunk["angle_mean_deg"], abs=0.5)

@@ -1,0 +1,310 @@
+"""Tray collection, overlap and CV against hand computations and analytic patterns."""
+
+import math
+
+import numpy as np
+import pytest
+
+from spreadgym.errors import ConfigError
+from spreadgym.spread.pattern import (
+    DRIVING,
+    Trays,
+    bout_pattern,
+    collect,
+    cv_confidence_interval,
+    cv_curve,
+    cv_percent,
+    effective_swath_m,
+    mass_balance,
+)
+
+W_TRAY = 0.5
+
+
+def _grid(half_count, w=W_TRAY):
+    return np.arange(-half_count, half_count + 1) * w
+
+
+def triangle_trays(base_m=48.0, peak_x_m=0.0, w=W_TRAY, half_count=None):
+    """Tray masses of a triangle density (area 1) with support [-base/2, base/2]
+    (peak moved to peak_x_m for skewed cases), integrated exactly over each tray."""
+    a, b, c = -base_m / 2, base_m / 2, peak_x_m
+    height = 2.0 / (b - a)
+
+    def cdf(x):
+        x = min(max(x, a), b)
+        if x <= c:
+            return height * (x - a) ** 2 / (2 * (c - a)) if c > a else 0.0
+        left = height * (c - a) / 2
+        return left + height * (b - c) / 2 - height * (b - x) ** 2 / (2 * (b - c))
+
+    m = half_count if half_count is not None else int(math.ceil(b / w)) + 2
+    centers = _grid(m, w)
+    mass = np.array([cdf(x + w / 2) - cdf(x - w / 2) for x in centers])
+    return Trays(centers, mass, w)
+
+
+def gaussian_trays(sigma_m, w=W_TRAY, mean_m=0.0, half_width_m=None):
+    half = half_width_m if half_width_m is not None else 6 * sigma_m + abs(mean_m)
+    m = int(math.ceil(half / w))
+    centers = _grid(m, w)
+    cdf = lambda x: 0.5 * (1 + math.erf((x - mean_m) / (sigma_m * math.sqrt(2))))  # noqa: E731
+    mass = np.array([cdf(x + w / 2) - cdf(x - w / 2) for x in centers])
+    return Trays(centers, mass, w)
+
+
+def brute_force_bout(trays, n, driving):
+    """Lay the passes on a long tray grid one by one and read the strip of n trays
+    centred on pass 0 (centres in [-W/2, W/2))."""
+    m = trays.count // 2
+    passes = m // n + 3
+    offset = (passes + 1) * n + m
+    field = np.zeros(2 * offset + 1)
+    for j in range(-passes, passes + 1):
+        mirrored = driving == "back-and-forth" and j % 2 != 0
+        for i, p in zip(range(-m, m + 1), trays.mass_kg):
+            field[offset + j * n + (-i if mirrored else i)] += p
+    k = np.arange(n) - n // 2
+    return field[offset + k]
+
+
+def sample_cv(values):
+    values = np.asarray(values, dtype=float)
+    mean = values.sum() / values.size
+    sd = math.sqrt(((values - mean) ** 2).sum() / (values.size - 1))
+    return 100.0 * sd / mean
+
+
+# ---- collect -------------------------------------------------------------------
+
+
+def test_collect_by_hand():
+    x = [-0.26, -0.25, -0.24, 0.0, 0.249, 0.25, 0.74, 0.75]
+    mass = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0]
+    trays = collect(x, mass, 0.5)
+    # tray i covers [0.5 i - 0.25, 0.5 i + 0.25): -0.26 -> -1; -0.25..0.249 -> 0;
+    # 0.25, 0.74 -> 1; 0.75 -> 2; so m = 2 and five trays
+    np.testing.assert_array_equal(trays.center_m, [-1.0, -0.5, 0.0, 0.5, 1.0])
+    np.testing.assert_array_equal(trays.mass_kg, [0.0, 1.0, 2 + 4 + 8 + 16, 32 + 64, 128])
+    assert trays.width_m == 0.5
+    assert trays.pattern_width_m == 2.0  # trays -1..2 loaded
+    assert trays.reach_trays == 2
+
+
+def test_collect_min_half_width_and_empty():
+    trays = collect([0.1], [1.0], 0.5, min_half_width_m=24.0)
+    assert trays.count % 2 == 1
+    assert trays.center_m[-1] + 0.25 >= 24.0 and trays.center_m[0] - 0.25 <= -24.0
+    assert trays.center_m[-1] == 24.0  # 48 trays each side, exactly enough
+    empty = collect([], [], 0.5)
+    assert empty.count == 1 and empty.total_kg == 0.0
+
+
+def test_collect_conserves_mass():
+    rng = np.random.default_rng(4)
+    x = rng.normal(2.0, 7.0, 50_000)
+    mass = rng.uniform(1e-5, 3e-5, x.size)
+    trays = collect(x, mass, 0.5)
+    assert trays.count % 2 == 1
+    assert trays.center_m[trays.count // 2] == 0.0
+    assert math.isclose(trays.mass_kg.sum(), mass.sum(), rel_tol=1e-12)
+    # every granule inside the row
+    assert x.min() >= trays.center_m[0] - 0.25 and x.max() < trays.center_m[-1] + 0.25
+
+
+# ---- worked cases ----------------------------------------------------------------
+
+TRIANGLE_TABLE = [(12.0, 0.0), (16.0, 6.5), (24.0, 0.0), (28.0, 5.4), (32.0, 14.4), (36.0, 25.2)]
+
+
+@pytest.mark.parametrize("driving", DRIVING)
+@pytest.mark.parametrize("width, expected", TRIANGLE_TABLE)
+def test_triangle_worked_case(driving, width, expected):
+    trays = triangle_trays(48.0)
+    assert math.isclose(trays.total_kg, 1.0, rel_tol=1e-12)
+    cv = cv_percent(trays, width, driving)
+    assert abs(cv - expected) < 0.05, cv
+    # independent overlap and CV give the same number
+    assert cv == pytest.approx(sample_cv(brute_force_bout(trays, int(width / W_TRAY), driving)), abs=1e-9)
+
+
+@pytest.mark.parametrize("driving", DRIVING)
+@pytest.mark.parametrize("width, expected", [(20.0, 6.1), (24.0, 15.9)])
+def test_gaussian_worked_case(driving, width, expected):
+    trays = gaussian_trays(8.0)
+    assert abs(cv_percent(trays, width, driving) - expected) < 0.05
+
+
+# ---- overlap -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("driving", DRIVING)
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 8, 24, 25, 60, 97, 140])
+def test_bout_pattern_matches_brute_force_on_skewed_pattern(driving, n):
+    trays = triangle_trays(30.0, peak_x_m=9.0, half_count=40)
+    got = bout_pattern(trays, n * W_TRAY, driving)
+    assert got.shape == (n,)
+    np.testing.assert_allclose(got, brute_force_bout(trays, n, driving), rtol=1e-12, atol=1e-15)
+
+
+def test_racetrack_bout_holds_one_pass():
+    trays = triangle_trays(30.0, peak_x_m=9.0)
+    for n in (5, 12, 40):
+        assert bout_pattern(trays, n * W_TRAY, "racetrack").sum() == pytest.approx(trays.total_kg)
+
+
+def test_symmetric_pattern_same_for_both_driving_patterns():
+    trays = gaussian_trays(6.0)
+    for n in range(1, 80):
+        np.testing.assert_allclose(
+            bout_pattern(trays, n * W_TRAY, "racetrack"), bout_pattern(trays, n * W_TRAY, "back-and-forth")
+        )
+
+
+def test_skewed_pattern_differs_between_driving_patterns():
+    skewed = triangle_trays(30.0, peak_x_m=10.0)  # peak well right of the axis
+    half_gauss = Trays(_grid(60), np.where(_grid(60) >= 0, np.exp(-0.5 * (_grid(60) / 8.0) ** 2), 0.0), W_TRAY)
+    for trays in (skewed, half_gauss):
+        for width in (10.0, 15.0, 18.0, 20.5):
+            a = cv_percent(trays, width, "racetrack")
+            b = cv_percent(trays, width, "back-and-forth")
+            assert abs(a - b) > 0.5, (width, a, b)
+
+
+def test_back_and_forth_odd_bout_represents_the_whole_period():
+    """Back-and-forth repeats every 2W; with n odd the strip centred on a pass
+    holds each value of the period once (the period holds it twice)."""
+    trays = triangle_trays(30.0, peak_x_m=9.0, half_count=40)
+    for n in (3, 15, 31, 45):
+        strip = bout_pattern(trays, n * W_TRAY, "back-and-forth")
+        # lay the field with passes every n trays and read one 2n-tray period
+        m = trays.count // 2
+        passes = m // n + 4
+        offset = (passes + 2) * n + m
+        field = np.zeros(2 * offset + 1)
+        for j in range(-passes, passes + 1):
+            for i, p in zip(range(-m, m + 1), trays.mass_kg):
+                field[offset + j * n + (-i if j % 2 else i)] += p
+        period = field[offset - n: offset + n]
+        np.testing.assert_allclose(np.sort(np.repeat(strip, 2)), np.sort(period), rtol=1e-12, atol=1e-15)
+
+
+# ---- CV curve and effective swath -----------------------------------------------
+
+
+def test_cv_curve_default_widths():
+    trays = triangle_trays(48.0)
+    widths, cvs = cv_curve(trays, "racetrack")
+    assert widths[0] == W_TRAY
+    np.testing.assert_allclose(np.diff(widths), W_TRAY)
+    # loaded trays reach +-24 m: up to 97 trays
+    assert widths[-1] == pytest.approx((2 * 48 + 1) * W_TRAY)
+    assert cvs[0] == 0.0  # one tray per bout
+    assert np.all(np.isfinite(cvs))
+
+
+@pytest.mark.parametrize("driving", DRIVING)
+def test_effective_swath_triangle(driving):
+    trays = triangle_trays(48.0)
+    widths = np.arange(1, 200) * W_TRAY
+    cvs = np.array([sample_cv(brute_force_bout(trays, int(round(w / W_TRAY)), driving)) if w > W_TRAY else 0.0
+                    for w in widths])
+    for threshold in (15.0, 5.0, 25.0):
+        expected = widths[cvs <= threshold].max()
+        got = effective_swath_m(trays, driving, threshold)
+        assert got == pytest.approx(expected)
+    # 15 %: 32 m passes (14.4 %), 36 m fails (25.2 %)
+    assert 32.0 <= effective_swath_m(trays, driving, 15.0) < 36.0
+
+
+def test_effective_swath_takes_largest_width_of_non_monotone_curve():
+    trays = triangle_trays(48.0)
+    # CV 0 at 12 m, 6.5 % at 16 m, 0 at 24 m, 5.4 % at 28 m: at 5 % the curve fails
+    # between 12 and 24 m and passes again at 24 m
+    assert cv_percent(trays, 16.0, "racetrack") > 5.0
+    assert effective_swath_m(trays, "racetrack", 5.0) >= 24.0
+
+
+def test_effective_swath_none_and_empty():
+    empty = Trays(_grid(3), np.zeros(7), W_TRAY)
+    assert math.isnan(cv_percent(empty, 1.0, "racetrack"))
+    assert effective_swath_m(empty, "racetrack", 15.0) == 0.0
+    # a lone heap one tray wide: nothing but a one-tray bout reaches a tiny threshold
+    heap = Trays(_grid(10), np.where(np.arange(21) == 14, 1.0, 0.0), W_TRAY)
+    assert effective_swath_m(heap, "racetrack", 1.0, widths_m=[1.0, 2.0, 5.0]) == 0.0
+    assert effective_swath_m(heap, "racetrack", 1.0) == W_TRAY
+
+
+# ---- errors ---------------------------------------------------------------------
+
+
+def test_errors_name_their_keys():
+    trays = triangle_trays(48.0)
+    with pytest.raises(ConfigError) as e:
+        cv_percent(trays, 12.3, "racetrack")
+    assert e.value.key == "pattern.target_swath_m"
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ConfigError) as e:
+            bout_pattern(trays, bad, "racetrack")
+        assert e.value.key == "pattern.target_swath_m"
+    with pytest.raises(ConfigError) as e:
+        cv_percent(trays, 12.0, "spiral")
+    assert e.value.key == "pattern.driving" and "racetrack, back-and-forth" in str(e.value)
+    for bad in (0.0, -0.5):
+        with pytest.raises(ConfigError) as e:
+            collect([0.0], [1.0], bad)
+        assert e.value.key == "pattern.tray_width_m"
+    with pytest.raises(ConfigError):
+        Trays(_grid(2)[:-1], np.ones(4), W_TRAY)  # even count
+    with pytest.raises(ConfigError) as e:
+        effective_swath_m(trays, "racetrack", 0.0)
+    assert e.value.key == "pattern.cv_threshold_percent"
+
+
+# ---- bootstrap ------------------------------------------------------------------
+
+
+def test_bootstrap_interval_deterministic_and_sensible():
+    rng = np.random.default_rng(0)
+    x = rng.triangular(-12.0, 0.0, 12.0, 20_000)
+    mass = np.full(x.size, 2e-5)
+    point = cv_percent(collect(x, mass, 0.5), 8.0, "racetrack")
+    a = cv_confidence_interval(x, mass, 0.5, 8.0, "racetrack", resamples=100, rng=1)
+    b = cv_confidence_interval(x, mass, 0.5, 8.0, "racetrack", resamples=100, rng=np.random.default_rng(1))
+    assert a == b
+    lo, hi = a
+    assert lo < hi and lo - 1.0 < point < hi + 1.0
+    # fewer granules, wider interval
+    lo_s, hi_s = cv_confidence_interval(x[:2000], mass[:2000], 0.5, 8.0, "racetrack", resamples=100, rng=1)
+    assert hi_s - lo_s > hi - lo
+    with pytest.raises(ConfigError):
+        cv_confidence_interval(x, mass, 0.5, 8.0, "racetrack", level=1.5)
+
+
+def test_bootstrap_back_and_forth_runs():
+    rng = np.random.default_rng(2)
+    x = rng.normal(3.0, 5.0, 5000)
+    lo, hi = cv_confidence_interval(x, 1.0, 0.5, 10.0, "back-and-forth", resamples=50, rng=3)
+    point = cv_percent(collect(x, 1.0, 0.5), 10.0, "back-and-forth")
+    assert lo <= hi and lo - 2.0 < point < hi + 2.0
+
+
+def test_mass_balance():
+    mb = mass_balance(10.0, 9.0, 1.0)
+    assert mb["unaccounted_kg"] == 0.0 and mb["landed_fraction"] == 0.9
+
+
+def test_bootstrap_interval_covers_the_true_cv():
+    """Coverage against a pattern whose CV is known from two million granules.
+
+    The CV of a finite sample is biased upwards; an interval that ignores this (the
+    percentile bootstrap) almost never covers the truth here. Basic bootstrap: ~0.9.
+    """
+    rng = np.random.default_rng(0)
+    true_cv = cv_percent(collect(rng.normal(0.3, 2.0, 2_000_000), 1.0, 0.5), 5.5, "racetrack")
+    trials, covered = 60, 0
+    for trial in range(trials):
+        x = rng.normal(0.3, 2.0, 800)
+        lo, hi = cv_confidence_interval(x, 1.0, 0.5, 5.5, "racetrack", resamples=150, rng=trial)
+        covered += lo <= true_cv <= hi
+    assert covered / trials >= 0.8
