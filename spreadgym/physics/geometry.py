@@ -9,11 +9,15 @@ reaches the outer radius.
 from __future__ import annotations
 
 import math
+from typing import Sequence
 
 import numpy as np
 
+from spreadgym.config.scene import Deflector, Scene
 from spreadgym.physics.granules import rotate
-from spreadgym.config.scene import Scene
+
+ZONE_MARGIN_M = 0.01
+"""Clearance (m) between the outermost plate and the edge of the deflector zone."""
 
 
 def vane_segments(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -54,3 +58,21 @@ def crossing_fraction(p0: np.ndarray, p1: np.ndarray, radius: float) -> np.ndarr
     c = np.sum(p0 * p0, axis=1) - radius * radius
     root = (-b + np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))) / np.maximum(2.0 * a, 1e-300)
     return np.clip(root, 0.0, 1.0)
+
+
+def zone_radius_m(plates: Sequence[Deflector], max_granule_radius_m: float) -> float:
+    """Radius of the circle about the axis that holds every plate with clearance."""
+    reach = 0.0
+    for plate in plates:
+        for x, y in plate.endpoints():
+            reach = max(reach, math.hypot(x, y) + 0.5 * plate.thickness_m)
+    return reach + max_granule_radius_m + ZONE_MARGIN_M
+
+
+def advance_to_circle(position, velocity, radius_m):
+    """Time (N,) for straight-line motion from inside to the circle |x| = radius."""
+    a = np.sum(velocity * velocity, axis=1)
+    b = 2.0 * np.sum(position * velocity, axis=1)
+    c = np.sum(position * position, axis=1) - radius_m * radius_m
+    disc = np.maximum(b * b - 4.0 * a * c, 0.0)
+    return np.where(a > 0, (-b + np.sqrt(disc)) / np.maximum(2.0 * a, 1e-300), 0.0)

@@ -20,13 +20,12 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, FancyArrowPatch
 
 from spreadgym.spread import pattern
-from spreadgym.physics.geometry import vane_segments
+from spreadgym.physics.geometry import vane_segments, zone_radius_m
 
 FIGSIZE_IN = (7.0, 5.0)
 DPI = 100
 RAY_BEYOND_DISC_M = 0.3  # departure rays reach this far beyond the disc ...
 RAY_BEYOND_ZONE_M = 0.15  # ... or this far beyond the deflector zone, whichever is further
-ZONE_MARGIN_M = 0.01  # as in physics.pymunk_deflectors: plate reach + granule radius + margin
 
 # Colours (colour-blind friendly, from the Okabe-Ito palette where it matters).
 DISC_FACE, DISC_EDGE = "#eef1f4", "#59636e"
@@ -98,8 +97,7 @@ def _deflector_zone_m(result) -> float:
     plates = result.scene.deflectors
     if not plates:
         return 0.0
-    reach = max(math.hypot(x, y) + 0.5 * p.thickness_m for p in plates for x, y in p.endpoints())
-    return reach + float(result.granules.diameter_m.max()) / 2 + ZONE_MARGIN_M
+    return zone_radius_m(plates, float(result.granules.radius_m.max()))
 
 
 def _view_radius_m(result) -> float:

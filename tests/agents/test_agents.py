@@ -7,7 +7,6 @@ steps) so the whole file stays well under a minute.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest

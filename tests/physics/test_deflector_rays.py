@@ -10,7 +10,7 @@ import pytest
 from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.analytic.deflector_rays import capsule_hit, deflect
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, Departure
-from spreadgym.physics.stepped.pymunk_deflectors import zone_radius_m
+from spreadgym.physics.geometry import zone_radius_m
 from spreadgym.config.scene import Deflector
 
 R_GRANULE = 0.0015

@@ -16,7 +16,7 @@ A hit is an impulse (per unit mass) with the normal n at the contact:
   spin:        spin -> spin - J_t / (kappa r) for rotation "free", 0 for "locked".
 Several bounces are followed (rounds vectorised over granules) until each granule
 leaves the deflector zone: the circle about the axis used by the pymunk stage
-(`spreadgym.physics.stepped.pymunk_deflectors.zone_radius_m`: every plate end plus its half
+(`spreadgym.physics.geometry.zone_radius_m`: every plate end plus its half
 thickness, plus the largest granule radius, plus 1 cm). The state returned is the one
 on that circle, for every departed granule, whether it met a plate or not, so both
 deflector stages hand the flight the same kind of state. Retained granules are
@@ -31,7 +31,7 @@ import numpy as np
 
 from spreadgym.physics.contacts import Contacts, PlateContact
 from spreadgym.physics.departure import Departure
-from spreadgym.physics.stepped.pymunk_deflectors import zone_radius_m
+from spreadgym.physics.geometry import zone_radius_m
 from spreadgym.config.scene import Deflector
 
 GRAVITY_M_S2 = 9.81

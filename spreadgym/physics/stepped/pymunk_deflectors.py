@@ -19,13 +19,12 @@ import pymunk.batch as batch
 
 from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.departure import Departure
-from spreadgym.physics.geometry import crossing_fraction
+from spreadgym.physics.geometry import ZONE_MARGIN_M, advance_to_circle, crossing_fraction, zone_radius_m
 from spreadgym.physics.vertical import GRAVITY_M_S2
 from spreadgym.config.scene import Deflector
 
 GRANULES_PER_SPACE = 100
 TUNNEL_SAFETY = 0.5
-ZONE_MARGIN_M = 0.01
 MAX_ZONE_TIME_S = 2.0
 _STATE = (
     batch.BodyFields.BODY_ID
@@ -35,28 +34,10 @@ _STATE = (
 )
 
 
-def zone_radius_m(plates: Sequence[Deflector], max_granule_radius_m: float) -> float:
-    """Radius of the circle about the axis that holds every plate with clearance."""
-    reach = 0.0
-    for plate in plates:
-        for x, y in plate.endpoints():
-            reach = max(reach, math.hypot(x, y) + 0.5 * plate.thickness_m)
-    return reach + max_granule_radius_m + ZONE_MARGIN_M
-
-
 def deflector_time_step(speed_max_m_s: float, min_granule_radius_m: float, plates: Sequence[Deflector]) -> float:
     """Half the step at which the fastest granule could jump over the thinnest plate."""
     reach = min_granule_radius_m + 0.5 * min(p.thickness_m for p in plates)
     return TUNNEL_SAFETY * reach / max(speed_max_m_s, 1e-9)
-
-
-def advance_to_circle(position, velocity, radius_m):
-    """Time (N,) for straight-line motion from inside to the circle |x| = radius."""
-    a = np.sum(velocity * velocity, axis=1)
-    b = 2.0 * np.sum(position * velocity, axis=1)
-    c = np.sum(position * position, axis=1) - radius_m * radius_m
-    disc = np.maximum(b * b - 4.0 * a * c, 0.0)
-    return np.where(a > 0, (-b + np.sqrt(disc)) / np.maximum(2.0 * a, 1e-300), 0.0)
 
 
 def deflect_pymunk(
