@@ -18,7 +18,7 @@ def prepare(library):
     """(granules, contacts) for a scene, sampled with the scene's seed."""
 
     def _prepare(scene):
-        granules = sample_granules(scene, library.fertilizer(scene.fertilizer), np.random.default_rng(scene.sim.seed))
+        granules = sample_granules(scene, library.fertilizer(scene.fertilizer))
         return granules, resolve_contacts(scene, library)
 
     return _prepare

@@ -4,19 +4,31 @@ A real spreader feeds continuously, so a granule meets the spinner at a random p
 Because the disc and its vanes are rotationally symmetric, a granule released when
 the spinner stands at angle `phase` is simulated with the spinner at angle 0 and
 the release point turned by `-phase`; its departure state is turned back by
-`+phase`. Every random input (phase, diameter, the two feed offsets) is drawn as a
-Latin hypercube: each is stratified into N equal-probability slices with one granule
-per slice, the slices paired at random across inputs. That lowers the sampling noise
-of the pattern without biasing it (measured in `make bench`, section cv-noise).
+`+phase`.
+
+The random inputs (phase, diameter, the two feed offsets) are drawn as randomised
+quasi-Monte Carlo: the run's granules come in `replicates` independent replicates, each
+an independently scrambled Sobol point set in the four inputs (`scipy.stats.qmc`),
+mapped through the inverse CDFs. Every replicate is an unbiased sample of the inputs,
+the replicates are independent (that is what lets `spread.estimate` correct the CV for
+its sampling noise and give its standard error), and within a replicate the points
+fill the input space far more evenly than independent draws: measured on the paper
+scene, the standard deviation of the CV between seeds falls from 2.6 to about 0.5
+percentage points at 4096 granules (`make bench`, section cv-noise). Replicate k of
+seed s is the same whatever else is drawn, so K runs of R replicates pool into exactly
+the run of K R replicates.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 from scipy.special import ndtr, ndtri
+from scipy.stats import qmc
 
 from spreadgym.config.materials import Fertilizer
 from spreadgym.config.scene import Scene
@@ -31,6 +43,11 @@ class GranuleBatch:
     density_kg_m3: float
     release_xy_m: np.ndarray  # (N, 2) release point in the machine frame
     phase_rad: np.ndarray  # spinner angle when the granule is released
+    replicate: Optional[np.ndarray] = None  # (N,) independent replicate of each granule (default: all 0)
+
+    def __post_init__(self) -> None:
+        if self.replicate is None:
+            object.__setattr__(self, "replicate", np.zeros(self.diameter_m.shape[0], dtype=np.int64))
 
     @property
     def count(self) -> int:
@@ -51,14 +68,44 @@ def rotate(xy: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
     return np.stack([c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1]], axis=1)
 
 
-def sample_granules(scene: Scene, fertilizer: Fertilizer, rng: np.random.Generator) -> GranuleBatch:
-    """Draw `scene.sim.granules` granules.
+INPUTS = ("phase", "diameter", "feed_x", "feed_y")
+"""The random inputs of a granule, in the order of the Sobol dimensions."""
 
-    Diameter: normal(d50, sd) truncated to the fertilizer's [min, max] (scene values
-    override d50 and sd; sd 0 gives one size). Mass: sphere of the particle density.
+
+def replicate_sizes(granules: int, replicates: int) -> np.ndarray:
+    """Granules per replicate: as equal as possible, the first ones one larger."""
+    k = min(replicates, granules)
+    sizes = np.full(k, granules // k)
+    sizes[: granules % k] += 1
+    return sizes
+
+
+def replicate_uniforms(seed: int, replicate: int, count: int) -> np.ndarray:
+    """(count, 4) uniforms in (0, 1) of one replicate: a scrambled Sobol point set.
+
+    Seeded by (seed, replicate) alone. Counts that are not a power of two take the first
+    points of the sequence: still an unbiased sample, only less balanced."""
+    engine = qmc.Sobol(len(INPUTS), scramble=True, seed=np.random.default_rng([seed, replicate]))
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*balance properties of Sobol' points.*")
+        u = engine.random(count)
+    return np.clip(u, 1e-12, 1.0 - 1e-12)  # the inverse normal CDF needs (0, 1)
+
+
+def sample_granules(scene: Scene, fertilizer: Fertilizer, replicates: int = 1,
+                    first_replicate: int = 0) -> GranuleBatch:
+    """Draw `scene.sim.granules` granules in `replicates` replicates, seeded by `scene.sim.seed`.
+
+    Replicates are numbered from `first_replicate` (a pooled reference draws runs of the
+    same size with consecutive numbers). Diameter: normal(d50, sd) truncated to the
+    fertilizer's [min, max] (scene values override d50 and sd; sd 0 gives one size).
+    Mass: sphere of the particle density. Release point: the feed point plus normal
+    offsets of s.d. `feed.spread_m` per axis, kept inside the vanes.
     """
-    n = scene.sim.granules
-    u_phase, u_size, u_x, u_y = (_stratified(rng, n) for _ in range(4))
+    sizes = replicate_sizes(scene.sim.granules, replicates)
+    u = np.vstack([replicate_uniforms(scene.sim.seed, first_replicate + k, int(m)) for k, m in enumerate(sizes)])
+    u_phase, u_size, u_x, u_y = u.T
+    n = u.shape[0]
     size = fertilizer.size
     d50 = scene.granule.diameter_m if scene.granule.diameter_m is not None else size.d50_m
     sd = scene.granule.diameter_sd_m if scene.granule.diameter_sd_m is not None else size.sd_m
@@ -76,12 +123,8 @@ def sample_granules(scene: Scene, fertilizer: Fertilizer, rng: np.random.Generat
         release = release + feed.spread_m * np.column_stack([ndtri(u_x), ndtri(u_y)])
         release = _clip_inside(release, 0.95 * scene.vane_outer_radius_m)
     phase = 2.0 * math.pi * u_phase
-    return GranuleBatch(diameter, mass, density, release, phase)
-
-
-def _stratified(rng: np.random.Generator, n: int) -> np.ndarray:
-    """n uniforms in (0, 1), one in each slice [k/n, (k+1)/n), in random order."""
-    return (rng.permutation(n) + rng.random(n)) / n
+    replicate = np.repeat(np.arange(sizes.size), sizes)
+    return GranuleBatch(diameter, mass, density, release, phase, replicate)
 
 
 def _truncated_normal(mean, sd, lo, hi, uniform) -> np.ndarray:

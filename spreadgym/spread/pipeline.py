@@ -78,7 +78,7 @@ def run_scene(
     chosen, reason = choose_model(scene, model)
     fertilizer = library.fertilizer(scene.fertilizer)
     rng = np.random.default_rng(scene.sim.seed)
-    granules = sample_granules(scene, fertilizer, rng)
+    granules = sample_granules(scene, fertilizer)
 
     departure = run_spinner(scene, granules, contacts, chosen, progress, tracks)
     if chosen == "analytic":  # exact rays; the stepped models keep plates in pymunk

@@ -144,7 +144,7 @@ def _run_case(case: Case, granules: int, rotation: str, model: str, seed: int, l
     contacts = resolve_contacts(scene, library)
     chosen, _ = choose_model(scene, model)
     fertilizer = library.fertilizer(scene.fertilizer)
-    batch = sample_granules(scene, fertilizer, np.random.default_rng(scene.sim.seed))
+    batch = sample_granules(scene, fertilizer)
     departure = run_spinner(scene, batch, contacts, chosen)
     stats = departure_statistics(departure, scene.spinner.omega_rad_s)
     ref = closed_form_departure(

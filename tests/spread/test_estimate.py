@@ -1,0 +1,87 @@
+"""The corrected CV: unbiased on patterns with a known exact CV, honest standard errors."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from spreadgym.spread import estimate, pattern
+
+TRAY_M = 0.5
+HALF_WIDTH_M = 15.0
+GRANULES = 4000  # at 1000 the gaussian's noise outweighs its 6 % CV and no estimator is unbiased
+
+
+def exact_trays(cdf) -> np.ndarray:
+    """Expected tray masses (probabilities) of a landing distribution with CDF `cdf`."""
+    m = int(round(HALF_WIDTH_M / TRAY_M))
+    edges = (np.arange(-m, m + 2) - 0.5) * TRAY_M
+    return np.diff(cdf(edges))
+
+
+PATTERNS = {
+    # name: (sampler(rng, n) -> x, cdf, bout width, driving)
+    "gaussian": (lambda rng, n: rng.normal(0.0, 2.0, n), stats.norm(0, 2.0).cdf, 5.0, "racetrack"),
+    "triangle": (lambda rng, n: rng.triangular(-4.0, 0.0, 4.0, n), stats.triang(0.5, -4.0, 8.0).cdf, 5.0,
+                 "racetrack"),
+    "skewed": (lambda rng, n: rng.gamma(3.0, 1.0, n) - 3.0, stats.gamma(3.0, loc=-3.0).cdf, 4.0,
+               "back-and-forth"),
+}
+
+
+def exact_cv(name: str) -> float:
+    _, cdf, width, driving = PATTERNS[name]
+    probs = exact_trays(cdf)
+    return float(pattern._cv_rows(pattern._fold_matrix(probs.size, round(width / TRAY_M), driving) @ probs))
+
+
+def draw(name: str, seed: int, granules: int, replicates: int) -> estimate.CvEstimate:
+    sample, _, width, driving = PATTERNS[name]
+    rng = np.random.default_rng(seed)
+    x = np.clip(sample(rng, granules), -HALF_WIDTH_M, HALF_WIDTH_M)
+    replicate = np.arange(granules) % replicates
+    _, masses = estimate.replicate_tray_masses(x, 1.0, replicate, replicates, TRAY_M, HALF_WIDTH_M)
+    return estimate.estimate_cv(masses, TRAY_M, width, driving)
+
+
+@pytest.mark.parametrize("name", sorted(PATTERNS))
+def test_corrected_cv_is_unbiased_where_the_plain_cv_is_not(name):
+    exact = exact_cv(name)
+    runs = [draw(name, seed, GRANULES, 8) for seed in range(400)]
+    corrected = np.array([r.cv_percent for r in runs])
+    raw = np.array([r.raw_percent for r in runs])
+    se_of_mean = corrected.std(ddof=1) / np.sqrt(corrected.size)
+    assert abs(corrected.mean() - exact) < 3 * se_of_mean, (corrected.mean(), exact, se_of_mean)
+    # the plain CV of as many granules is biased upwards, far beyond its own standard error
+    assert raw.mean() - exact > 3 * raw.std(ddof=1) / np.sqrt(raw.size)
+
+
+@pytest.mark.parametrize("name", sorted(PATTERNS))
+def test_stated_standard_error_covers_the_exact_cv(name):
+    exact = exact_cv(name)
+    runs = [draw(name, 10_000 + seed, GRANULES, 8) for seed in range(400)]
+    covered = np.mean([r.interval_percent[0] <= exact <= r.interval_percent[1] for r in runs])
+    assert 0.90 <= covered <= 0.99, covered
+    stated = np.sqrt(np.mean([r.standard_error_percent**2 for r in runs]))
+    observed = np.std([r.cv_percent for r in runs], ddof=1)
+    assert stated == pytest.approx(observed, rel=0.25)
+
+
+def test_one_replicate_gives_the_plain_cv_and_no_standard_error():
+    result = draw("gaussian", 0, 500, 1)
+    assert result.cv_percent == pytest.approx(result.raw_percent, rel=1e-12)
+    assert result.standard_error_percent is None and result.interval_percent is None
+
+
+def test_pooled_trays_equal_the_sum_of_the_replicates():
+    rng = np.random.default_rng(1)
+    x = rng.normal(0, 2, 3000)
+    mass = rng.uniform(1e-5, 3e-5, 3000)
+    replicate = rng.integers(0, 5, 3000)
+    trays, per_replicate = estimate.replicate_tray_masses(x, mass, replicate, 5, TRAY_M)
+    np.testing.assert_allclose(per_replicate.sum(axis=0), trays.mass_kg, rtol=1e-12, atol=1e-18)
+    assert np.array_equal(trays.mass_kg, pattern.collect(x, mass, TRAY_M).mass_kg)
+
+
+def test_empty_pattern_has_no_cv():
+    result = estimate.estimate_cv(np.zeros((4, 21)), TRAY_M, 3.0, "racetrack")
+    assert result == estimate.CvEstimate(None, None, None, None)
