@@ -135,7 +135,7 @@ def test_hand_set_step_beyond_the_critical_step_is_refused(prepare):
 
 
 def test_unchecked_step_past_the_limit_runs_and_shows_the_blow_up(prepare):
-    scene = load_scene("paper", {"sim.granules": 8, "feed.spread_m": 0.0})
+    scene = load_scene("paper", {"sim.granules": 32, "feed.spread_m": 0.0})
     granules, contacts = prepare(scene)
     limit = sd.explicit_critical_step_s(contacts.vane_restitution, contacts.vane_contact_time_s)
     departure = sd.simulate_spring_damper(scene, granules, contacts, dt_s=1.3 * limit, unchecked=True)
