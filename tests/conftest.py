@@ -1,6 +1,5 @@
 """Shared fixtures: the material library and small, fast scenes."""
 
-import numpy as np
 import pytest
 
 from spreadgym.physics.contacts import resolve_contacts

@@ -13,6 +13,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                   "spring-dashpot contact parameters from restitution, contact time and mass (Eqs. 8-10)"),
     "simulate": ("spreadgym.cli.simulate",
                  "simulate a scene: departure from the spinner, flight, tray pattern, CV and swath"),
+    "reference": ("spreadgym.cli.reference",
+                  "a converged pattern: independent runs of a scene pooled, CV and swath with standard errors"),
     "study": ("spreadgym.cli.study",
               "rerun a published simulation study (paper: material, rpm, diameter; free vs locked rotation)"),
     "train": ("spreadgym.agents.commands.train",

@@ -73,11 +73,10 @@ INPUTS = ("phase", "diameter", "feed_x", "feed_y")
 
 
 def replicate_sizes(granules: int, replicates: int) -> np.ndarray:
-    """Granules per replicate: as equal as possible, the first ones one larger."""
-    k = min(replicates, granules)
-    sizes = np.full(k, granules // k)
-    sizes[: granules % k] += 1
-    return sizes
+    """Granules per replicate, all equal: the most replicates, at most `replicates`, that
+    divide the granule count (so every replicate is an identically distributed sample)."""
+    k = max(d for d in range(1, min(replicates, granules) + 1) if granules % d == 0)
+    return np.full(k, granules // k)
 
 
 def replicate_uniforms(seed: int, replicate: int, count: int) -> np.ndarray:

@@ -13,7 +13,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from spreadgym.spread import flight as flight_model
-from spreadgym.spread import pattern
+from spreadgym.spread import estimate, pattern
 from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.granules import GranuleBatch, sample_granules
 from spreadgym.config.materials import MaterialLibrary, load_library
@@ -26,8 +26,6 @@ from spreadgym.physics.selection import choose_model
 from spreadgym.physics.stepped.spring_damper import simulate_spring_damper
 from spreadgym.config.scene import Scene
 
-CI_LEVEL = 0.95
-CI_RESAMPLES = 200
 
 
 @dataclass
@@ -38,6 +36,7 @@ class SimulationResult:
     launch: Departure  # state where the flight starts (after the deflector zone)
     landing: flight_model.Landing
     trays: pattern.Trays
+    replicate_masses_kg: np.ndarray  # (K, T) tray masses of each independent replicate
     metrics: dict
 
 
@@ -66,10 +65,11 @@ def run_scene(
     progress: Optional[Callable[[float], None]] = None,
     ci: bool = True,
     tracks: int = 0,
+    first_replicate: int = 0,
 ) -> SimulationResult:
-    """Simulate `scene` end to end with a fresh random generator seeded by sim.seed.
+    """Simulate `scene` end to end; the granules are the replicates of sim.seed from `first_replicate`.
 
-    `progress(t)` is called with the simulated spinner time (s); `ci` adds the bootstrap
+    `progress(t)` is called with the simulated spinner time (s); `ci` adds the 95 %
     interval of the CV; `tracks` keeps that many granule paths for pictures.
     """
     started = time.perf_counter()
@@ -77,8 +77,7 @@ def run_scene(
     contacts = resolve_contacts(scene, library)
     chosen, reason = choose_model(scene, model)
     fertilizer = library.fertilizer(scene.fertilizer)
-    rng = np.random.default_rng(scene.sim.seed)
-    granules = sample_granules(scene, fertilizer)
+    granules = sample_granules(scene, fertilizer, scene.sim.replicates, first_replicate)
 
     departure = run_spinner(scene, granules, contacts, chosen, progress, tracks)
     if chosen == "analytic":  # exact rays; the stepped models keep plates in pymunk
@@ -97,11 +96,12 @@ def run_scene(
     )
     landed_mass = granules.mass_kg[flying]
     p = scene.pattern
-    trays = pattern.collect(landing.position_m[:, 0], landed_mass, p.tray_width_m,
-                            min_half_width_m=p.target_swath_m)
-    metrics = _metrics(scene, chosen, reason, granules, departure, launch, trays, landing, landed_mass, ci, rng)
+    trays, replicate_masses = estimate.replicate_tray_masses(
+        landing.position_m[:, 0], landed_mass, granules.replicate[flying], int(granules.replicate.max()) + 1,
+        p.tray_width_m, min_half_width_m=p.target_swath_m)
+    metrics = _metrics(scene, chosen, reason, granules, departure, launch, trays, replicate_masses, ci)
     metrics["wall_s"] = time.perf_counter() - started
-    return SimulationResult(scene, granules, departure, launch, landing, trays, metrics)
+    return SimulationResult(scene, granules, departure, launch, landing, trays, replicate_masses, metrics)
 
 
 def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
@@ -125,20 +125,16 @@ def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
     }
 
 
-def _metrics(scene, model, reason, granules, departure, launch, trays, landing, landed_mass, ci, rng) -> dict:
+def _metrics(scene, model, reason, granules, departure, launch, trays, replicate_masses, ci) -> dict:
     p = scene.pattern
     released = float(granules.mass_kg.sum())
-    landed = float(landed_mass.sum())
+    landed = trays.total_kg
     retained = float(granules.mass_kg[~departure.departed].sum())
     has_mass = landed > 0.0
-    cv = pattern.cv_percent(trays, p.target_swath_m, p.driving) if has_mass else None
-    interval = None
-    if has_mass and ci:
-        interval = list(pattern.cv_confidence_interval(
-            landing.position_m[:, 0], landed_mass, p.tray_width_m, p.target_swath_m, p.driving,
-            level=CI_LEVEL, resamples=CI_RESAMPLES, rng=rng,
-        ))
-    widths, cvs = pattern.cv_curve(trays, p.driving) if has_mass else (np.zeros(0), np.zeros(0))
+    at_target = estimate.estimate_cv(replicate_masses, p.tray_width_m, p.target_swath_m, p.driving)
+    interval = list(at_target.interval_percent) if ci and at_target.interval_percent is not None else None
+    widths = pattern.default_widths_m(trays) if has_mass else np.zeros(0)
+    cvs, _ = estimate.cv_curve(replicate_masses, p.tray_width_m, p.driving, widths)
     return {
         "model": model,
         "model_reason": reason,
@@ -150,7 +146,9 @@ def _metrics(scene, model, reason, granules, departure, launch, trays, landing, 
         "driving": p.driving,
         "tray_width_m": p.tray_width_m,
         "cv_threshold_percent": p.cv_threshold_percent,
-        "cv_percent_at_target": cv,
+        "cv_percent_at_target": at_target.cv_percent,
+        "cv_standard_error_percent": at_target.standard_error_percent,
+        "cv_raw_percent": at_target.raw_percent,
         "cv_ci_percent": interval,
         "effective_swath_m": pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent) if has_mass else 0.0,
         "cv_curve": {"bout_width_m": widths, "cv_percent": cvs},

@@ -72,7 +72,8 @@ def test_set_values_are_yaml():
 
 
 SIMULATE_KEYS = {"model", "dt_s", "granules", "departure", "wall_s", "target_swath_m", "driving", "tray_width_m",
-                 "cv_percent_at_target", "cv_ci_percent", "effective_swath_m", "trays", "mass"}
+                 "cv_percent_at_target", "cv_standard_error_percent", "cv_raw_percent", "cv_ci_percent",
+                 "effective_swath_m", "trays", "mass"}
 DEPARTURE_KEYS = {"speed_mean_m_s", "speed_std_m_s", "spin_mean_rad_s", "angle_mean_deg", "time_on_spinner_mean_s"}
 
 
@@ -85,14 +86,15 @@ def test_simulate_json_contract_and_mass_balance(capsys):
     assert mass["released_kg"] == pytest.approx(mass["landed_kg"] + mass["retained_kg"], rel=1e-12)
     trays = np.array(out["trays"]["mass_kg"])
     assert trays.sum() == pytest.approx(mass["landed_kg"], rel=1e-12)
-    # outside checks recompute the CV from the trays: it must match the reported one
+    # outside checks recompute the plain tray CV from the trays: it must match the reported one
     centers = np.array(out["trays"]["center_m"])
     n = round(out["target_swath_m"] / out["tray_width_m"])
     k = np.round(centers / out["tray_width_m"]).astype(int)
     bout = np.bincount((k + n // 2) % n, weights=trays, minlength=n)  # racetrack fold
-    assert 100 * bout.std(ddof=1) / bout.mean() == pytest.approx(out["cv_percent_at_target"], rel=1e-9)
+    assert 100 * bout.std(ddof=1) / bout.mean() == pytest.approx(out["cv_raw_percent"], rel=1e-9)
+    # the reported CV is that one corrected for counting noise, inside its interval
     lo, hi = out["cv_ci_percent"]
-    assert 0 <= lo <= hi
+    assert 0 <= lo <= out["cv_percent_at_target"] <= hi and out["cv_standard_error_percent"] > 0
 
 
 def test_simulate_bad_input_exits_2_without_traceback():

@@ -11,7 +11,6 @@ from spreadgym.spread.pattern import (
     Trays,
     bout_pattern,
     collect,
-    cv_confidence_interval,
     cv_curve,
     cv_percent,
     effective_swath_m,
@@ -261,50 +260,6 @@ def test_errors_name_their_keys():
     assert e.value.key == "pattern.cv_threshold_percent"
 
 
-# ---- bootstrap ------------------------------------------------------------------
-
-
-def test_bootstrap_interval_deterministic_and_sensible():
-    rng = np.random.default_rng(0)
-    x = rng.triangular(-12.0, 0.0, 12.0, 20_000)
-    mass = np.full(x.size, 2e-5)
-    point = cv_percent(collect(x, mass, 0.5), 8.0, "racetrack")
-    a = cv_confidence_interval(x, mass, 0.5, 8.0, "racetrack", resamples=100, rng=1)
-    b = cv_confidence_interval(x, mass, 0.5, 8.0, "racetrack", resamples=100, rng=np.random.default_rng(1))
-    assert a == b
-    lo, hi = a
-    assert lo < hi and lo - 1.0 < point < hi + 1.0
-    # fewer granules, wider interval
-    lo_s, hi_s = cv_confidence_interval(x[:2000], mass[:2000], 0.5, 8.0, "racetrack", resamples=100, rng=1)
-    assert hi_s - lo_s > hi - lo
-    with pytest.raises(ConfigError):
-        cv_confidence_interval(x, mass, 0.5, 8.0, "racetrack", level=1.5)
-
-
-def test_bootstrap_back_and_forth_runs():
-    rng = np.random.default_rng(2)
-    x = rng.normal(3.0, 5.0, 5000)
-    lo, hi = cv_confidence_interval(x, 1.0, 0.5, 10.0, "back-and-forth", resamples=50, rng=3)
-    point = cv_percent(collect(x, 1.0, 0.5), 10.0, "back-and-forth")
-    assert lo <= hi and lo - 2.0 < point < hi + 2.0
-
-
 def test_mass_balance():
     mb = mass_balance(10.0, 9.0, 1.0)
     assert mb["unaccounted_kg"] == 0.0 and mb["landed_fraction"] == 0.9
-
-
-def test_bootstrap_interval_covers_the_true_cv():
-    """Coverage against a pattern whose CV is known from two million granules.
-
-    The CV of a finite sample is biased upwards; an interval that ignores this (the
-    percentile bootstrap) almost never covers the truth here. Basic bootstrap: ~0.9.
-    """
-    rng = np.random.default_rng(0)
-    true_cv = cv_percent(collect(rng.normal(0.3, 2.0, 2_000_000), 1.0, 0.5), 5.5, "racetrack")
-    trials, covered = 60, 0
-    for trial in range(trials):
-        x = rng.normal(0.3, 2.0, 800)
-        lo, hi = cv_confidence_interval(x, 1.0, 0.5, 5.5, "racetrack", resamples=150, rng=trial)
-        covered += lo <= true_cv <= hi
-    assert covered / trials >= 0.8
