@@ -147,6 +147,8 @@ class Sim(_Strict):
     granules: int = Field(ge=1, le=1_000_000)
     dt_s: Optional[float] = Field(default=None, gt=0, le=0.01, description="null: chosen from the scene")
     seed: int = Field(default=0, ge=0)
+    sampler: Literal["qmc", "mc"] = Field(
+        default="qmc", description="qmc: scrambled Sobol points per replicate; mc: independent uniform draws")
     replicates: int = Field(default=8, ge=1, le=4096,
                             description="independent replicates per run (the CV's bias correction and "
                                         "standard error rest on them); the most that divide sim.granules")

@@ -79,12 +79,16 @@ def replicate_sizes(granules: int, replicates: int) -> np.ndarray:
     return np.full(k, granules // k)
 
 
-def replicate_uniforms(seed: int, replicate: int, count: int) -> np.ndarray:
-    """(count, 4) uniforms in (0, 1) of one replicate: a scrambled Sobol point set.
+def replicate_uniforms(seed: int, replicate: int, count: int, sampler: str = "qmc") -> np.ndarray:
+    """(count, 4) uniforms in (0, 1) of one replicate: a scrambled Sobol point set ("qmc")
+    or independent draws ("mc", the plain Monte Carlo the benchmarks compare against).
 
     Seeded by (seed, replicate) alone. Counts that are not a power of two take the first
     points of the sequence: still an unbiased sample, only less balanced."""
-    engine = qmc.Sobol(len(INPUTS), scramble=True, seed=np.random.default_rng([seed, replicate]))
+    rng = np.random.default_rng([seed, replicate])
+    if sampler == "mc":
+        return rng.random((count, len(INPUTS)))
+    engine = qmc.Sobol(len(INPUTS), scramble=True, seed=rng)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*balance properties of Sobol' points.*")
         u = engine.random(count)
@@ -102,7 +106,8 @@ def sample_granules(scene: Scene, fertilizer: Fertilizer, replicates: int = 1,
     offsets of s.d. `feed.spread_m` per axis, kept inside the vanes.
     """
     sizes = replicate_sizes(scene.sim.granules, replicates)
-    u = np.vstack([replicate_uniforms(scene.sim.seed, first_replicate + k, int(m)) for k, m in enumerate(sizes)])
+    u = np.vstack([replicate_uniforms(scene.sim.seed, first_replicate + k, int(m), scene.sim.sampler)
+                   for k, m in enumerate(sizes)])
     u_phase, u_size, u_x, u_y = u.T
     n = u.shape[0]
     size = fertilizer.size
