@@ -1,0 +1,116 @@
+"""How good is one run's CV? Bias and spread against converged references (`make bench`).
+
+Two benchmarks:
+* `cv_noise_rows`: on one scene and model, the CV of single runs against the converged
+  CV of the same model, for plain Monte Carlo and the QMC sampler, each scored by the
+  plain tray CV and by the bias-corrected estimate, across granule counts.
+* `target_rows`: the default evaluation (default granule count and sampler) on every
+  reference scene against its stored converged reference: the estimate's bias, its
+  spread over seeds, how often the effective swath equals the converged one, the wall time.
+"""
+
+from __future__ import annotations
+
+import statistics
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+
+from spreadgym.config.scene import load_scene, scene_with
+from spreadgym.spread.pipeline import run_scene
+from spreadgym.spread.reference import pool_runs, reference_from
+from spreadgym.studies.references import load_references, reference_family
+
+NOISE_COUNTS = (512, 1024, 2048, 4096, 8192)
+SAMPLERS = ("mc", "qmc")
+
+
+def cv_noise_rows(scene_name: str = "paper", model: str = "analytic", counts=NOISE_COUNTS, seeds: int = 16,
+                  reference_runs: int = 64, overrides: Optional[dict] = None) -> list[dict]:
+    """Bias and s.d. over seeds of the plain and the corrected CV, per sampler and granule count."""
+    base = dict(overrides or {})
+    converged = reference_from(load_scene(scene_name, {**base, "sim.seed": 10_000}),
+                               pool_runs(load_scene(scene_name, {**base, "sim.seed": 10_000}), reference_runs,
+                                         model=model)).at_target
+    rows = []
+    for sampler in SAMPLERS:
+        for n in counts:
+            raw, corrected, walls = [], [], []
+            for seed in range(seeds):
+                scene = load_scene(scene_name, {**base, "sim.granules": n, "sim.seed": seed, "sim.sampler": sampler})
+                m = run_scene(scene, model=model).metrics
+                raw.append(m["cv_raw_percent"])
+                corrected.append(m["cv_percent_at_target"])
+                walls.append(m["wall_s"])
+            for estimator, values in (("plain", np.array(raw)), ("corrected", np.array(corrected))):
+                rows.append({
+                    "scene": scene_name, "model": model, "sampler": sampler, "estimator": estimator, "granules": n,
+                    "seeds": seeds, "converged_cv_percent": converged.cv_percent,
+                    "converged_se_percent": converged.standard_error_percent,
+                    "bias_pp": float(values.mean() - converged.cv_percent),
+                    "bias_se_pp": float(values.std(ddof=1) / np.sqrt(seeds)),
+                    "sd_pp": float(values.std(ddof=1)), "wall_median_s": statistics.median(walls),
+                })
+    return rows
+
+
+def plot_cv_noise(rows: list[dict], path) -> None:
+    """Bias and s.d. of one run's CV against granule count, per sampler and estimator."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11, 4.2), dpi=100)
+    ax_bias, ax_sd = fig.subplots(1, 2)
+    styles = {("mc", "plain"): ("tab:red", "o--"), ("mc", "corrected"): ("tab:red", "o-"),
+              ("qmc", "plain"): ("tab:blue", "s--"), ("qmc", "corrected"): ("tab:blue", "s-")}
+    for (sampler, estimator), (colour, style) in styles.items():
+        data = [r for r in rows if r["sampler"] == sampler and r["estimator"] == estimator]
+        n = [r["granules"] for r in data]
+        label = f"{'plain Monte Carlo' if sampler == 'mc' else 'scrambled Sobol'}, {estimator} CV"
+        ax_bias.errorbar(n, [r["bias_pp"] for r in data], yerr=[2 * r["bias_se_pp"] for r in data], fmt=style,
+                         color=colour, label=label, capsize=3)
+        ax_sd.plot(n, [r["sd_pp"] for r in data], style, color=colour, label=label)
+    for ax, title in ((ax_bias, "bias against the converged CV (pp, ±2 SE)"), (ax_sd, "s.d. over seeds (pp)")):
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("granules per run")
+        ax.set_title(title, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+    ax_bias.axhline(0.0, color="k", lw=0.8)
+    for level in (-0.3, 0.3):
+        ax_bias.axhline(level, color="grey", lw=0.8, ls=":")
+    ax_sd.axhline(0.3, color="grey", lw=0.8, ls=":", label="target 0.3 pp")
+    ax_sd.set_yscale("log")
+    ax_sd.legend(fontsize=8)
+    r0 = rows[0]
+    fig.suptitle(f"One run's CV at the target swath, {r0['scene']} scene, {r0['model']} model "
+                 f"(converged {r0['converged_cv_percent']:.2f} %, {r0['seeds']} seeds per point)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
+def target_rows(references_dir: Path, model: str = "pymunk", seeds: int = 10,
+                progress: Callable[[str], None] = lambda _: None) -> list[dict]:
+    """The default evaluation of `model` on every scene with a stored `model` reference."""
+    references = load_references(references_dir, model)
+    family = reference_family()
+    rows = []
+    for name, ref in references.items():
+        progress(f"{name}: {seeds} seeds, {model}")
+        cvs, swaths, walls = [], [], []
+        for seed in range(seeds):
+            m = run_scene(scene_with(family[name], {"sim.seed": seed}), model=model).metrics
+            cvs.append(m["cv_percent_at_target"])
+            swaths.append(m["effective_swath_m"])
+            walls.append(m["wall_s"])
+        cvs = np.array(cvs, dtype=float)
+        rows.append({
+            "scene": name, "model": model, "granules": family[name].sim.granules, "seeds": seeds,
+            "converged_cv_percent": ref["cv_percent_at_target"],
+            "converged_se_percent": ref["cv_standard_error_percent"],
+            "mean_cv_percent": float(cvs.mean()), "bias_pp": float(cvs.mean() - ref["cv_percent_at_target"]),
+            "bias_se_pp": float(cvs.std(ddof=1) / np.sqrt(seeds)), "sd_pp": float(cvs.std(ddof=1)),
+            "converged_swath_m": ref["effective_swath_m"],
+            "swath_equal_seeds": int(sum(s == ref["effective_swath_m"] for s in swaths)),
+            "wall_median_s": statistics.median(walls),
+        })
+    return rows
