@@ -88,13 +88,15 @@ def plot_cv_noise(rows: list[dict], path) -> None:
     fig.savefig(path)
 
 
-def target_rows(references_dir: Path, model: str = "pymunk", seeds: int = 10,
+def target_rows(references_dir: Path, model: str = "pymunk", seeds: int = 10, names: Optional[list[str]] = None,
                 progress: Callable[[str], None] = lambda _: None) -> list[dict]:
-    """The default evaluation of `model` on every scene with a stored `model` reference."""
+    """The default evaluation of `model` on every scene (of `names`) with a stored `model` reference."""
     references = load_references(references_dir, model)
     family = reference_family()
     rows = []
     for name, ref in references.items():
+        if names is not None and name not in names:
+            continue
         progress(f"{name}: {seeds} seeds, {model}")
         cvs, swaths, walls = [], [], []
         for seed in range(seeds):
