@@ -2,15 +2,23 @@
 
 Each search maximises the env's reward over the unit action box [-1, 1]^A with a
 budget of simulations (one env step = one simulation, counted by the env's
-`SimulationCounter`). The searches step one job repeatedly without a reset: the env
-then re-runs the same job with the same granule sample (common random numbers), so
-the searches compare settings without sampling noise between them. The chosen
-settings are then scored like every other method (`evaluation.score_action`), on a
-different granule sample.
+`SimulationCounter`). Scoring is honest, so that what a search believes is what fresh
+granule samples give (`search_job`):
 
-* random: `budget` points drawn uniformly in the box.
+* every evaluation runs on a fresh granule sample (its own reset seed), so a search
+  cannot tune itself to the luck of one sample;
+* the search itself gets `1 - RESCORE_FRACTION` of the budget; the rest (and whatever
+  the search leaves unspent) re-scores its leaders (the best `LEADERS` distinct points,
+  fewer when that leaves under two re-scores each) on fresh samples, and the leader with
+  the best mean re-scored reward wins. Its belief (`search_best_cv_percent`, with a
+  standard error from the spread of its re-scores) rests on those re-scores only,
+  never on the single lucky evaluation that made it a leader.
+
+The chosen settings are then scored like every other method (`evaluation.score_action`).
+
+* random: points drawn uniformly in the box.
 * grid: the full grid with n = floor(budget^(1/A)) points per axis (ends included),
-  e.g. 14 x 14 = 196 points for A = 2 and a budget of 200.
+  e.g. 12 x 12 = 144 points for A = 2 and a search budget of 150.
 * cmaes: `cma` (Hansen's CMA-ES) bounded to the box (its BoundTransform), started at
   the centre with sigma0 = 0.5 (a quarter of the box width); when it stops before the
   budget is spent (flat fitness, tolerances) it restarts from a uniform random point
@@ -26,11 +34,13 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from spreadgym.agents.evaluation import EvalContext, Row, score_action
+from spreadgym.agents.evaluation import SEARCH_SEED, WORST_CV_PERCENT, EvalContext, Row, score_action
 from spreadgym.errors import SpreadgymError
 
 DEFAULT_BUDGET = 200
 CMA_SIGMA0 = 0.5
+RESCORE_FRACTION = 0.25  # of the budget spent re-scoring the leaders on fresh samples
+LEADERS = 4  # distinct best points re-scored
 
 Objective = Callable[[np.ndarray], float]  # unit action -> reward (to maximise)
 
@@ -41,7 +51,7 @@ class SearchResult:
     best_reward: float
     evaluations: int
     history: list = field(default_factory=list)  # reward of each evaluation, in order
-    best_metrics: dict = field(default_factory=dict)  # metrics of the best run (search_job only)
+    points: list = field(default_factory=list)  # the point of each evaluation, in order
 
 
 class _Tracker:
@@ -54,6 +64,7 @@ class _Tracker:
         self.best_x = np.zeros(dim)
         self.best_reward = -math.inf
         self.history: list[float] = []
+        self.points: list[np.ndarray] = []
 
     @property
     def left(self) -> int:
@@ -65,12 +76,13 @@ class _Tracker:
         x = np.clip(np.asarray(x, dtype=float).reshape(self.dim), -1.0, 1.0)
         reward = float(self.objective(x))
         self.history.append(reward)
+        self.points.append(x.copy())
         if reward > self.best_reward:
             self.best_reward, self.best_x = reward, x.copy()
         return reward
 
     def result(self) -> SearchResult:
-        return SearchResult(self.best_x, self.best_reward, len(self.history), self.history)
+        return SearchResult(self.best_x, self.best_reward, len(self.history), self.history, self.points)
 
 
 def _check_budget(budget: int) -> int:
@@ -135,27 +147,88 @@ METHOD_TITLES = {"published": "published settings", "random": "random search", "
                  "cmaes": "CMA-ES"}
 
 
+@dataclass
+class Leader:
+    """A point the search kept, with its rewards and CVs on fresh re-scoring samples."""
+
+    x: np.ndarray
+    rewards: list = field(default_factory=list)
+    cvs: list = field(default_factory=list)  # CV at target (%); a run where nothing landed counts 100 %
+    cv_ses: list = field(default_factory=list)  # each re-score's own standard error of the CV (pp)
+
+    @property
+    def mean_reward(self) -> float:
+        return float(np.mean(self.rewards)) if self.rewards else -math.inf
+
+    def cv_belief(self) -> tuple[Optional[float], Optional[float]]:
+        """Mean CV of the re-scores and its standard error (from each run's own standard error,
+        which rests on its replicates: steadier than the spread of a few re-scores)."""
+        if not self.cvs:
+            return None, None
+        ses = [se for se in self.cv_ses if se is not None]
+        se = float(math.sqrt(sum(v * v for v in ses)) / len(ses)) if len(ses) == len(self.cvs) else None
+        return float(np.mean(self.cvs)), se
+
+
+def split_budget(budget: int) -> tuple[int, int]:
+    """(simulations for the search, simulations for re-scoring its leaders)."""
+    rescore = int(round(RESCORE_FRACTION * budget))
+    if rescore < 2:  # too small to re-score anything: the search takes it all
+        return budget, 0
+    return budget - rescore, rescore
+
+
+def leaders(result: SearchResult, count: int = LEADERS) -> list[np.ndarray]:
+    """The `count` best distinct points of a search, best first."""
+    order = np.argsort(-np.asarray(result.history, dtype=float), kind="stable")
+    chosen: list[np.ndarray] = []
+    for i in order:
+        x = result.points[i]
+        if not any(np.array_equal(x, c) for c in chosen):
+            chosen.append(x)
+        if len(chosen) == count:
+            break
+    return chosen
+
+
+def evaluation_seed(ctx: EvalContext, evaluation: int) -> int:
+    """Reset seed of a search's `evaluation`-th simulation on job `ctx` (a fresh sample each)."""
+    return int(np.random.SeedSequence([SEARCH_SEED, ctx.index, evaluation]).generate_state(1)[0])
+
+
 def search_job(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGET, seed: int = 0) -> tuple:
-    """Run one search on one job (its search seed); returns (SearchResult, simulations, seconds)."""
+    """Run one search on one job and re-score its leaders; returns (Leader, simulations, seconds)."""
     if method not in SEARCHES:
         raise SpreadgymError(f"unknown baseline {method!r}; known: {', '.join(SEARCHES)}")
     started = time.perf_counter()
     before = env.simulations
-    env.reset(seed=ctx.search_seed, options=ctx.options())
-    best: dict = {"reward": -math.inf}
+    counter = iter(range(budget))
 
-    def objective(x: np.ndarray) -> float:
-        _, reward, _, _, info = env.step(x)
-        if reward > best["reward"]:
-            best.update(reward=float(reward), metrics=info["metrics"])
-        return float(reward)
+    def simulate(x: np.ndarray) -> tuple[float, float, Optional[float]]:
+        env.reset(seed=evaluation_seed(ctx, next(counter)), options=ctx.options())
+        _, reward, _, _, info = env.step(np.asarray(x, dtype=np.float64))
+        cv, se = info["metrics"].get("cv_percent_at_target"), info["metrics"].get("cv_standard_error_percent")
+        return float(reward), (WORST_CV_PERCENT if cv is None else float(cv)), se
 
-    result = SEARCHES[method](objective, env.action_space.shape[0], budget, seed=seed + ctx.index)
-    result.best_metrics = best.get("metrics", {})
+    search_budget, _ = split_budget(_check_budget(budget))
+    result = SEARCHES[method](lambda x: simulate(x)[0], env.action_space.shape[0], search_budget,
+                              seed=seed + ctx.index)
+    rescore_budget = budget - result.evaluations  # what the search left (a grid may leave more)
+    kept = [Leader(x) for x in leaders(result, max(1, min(LEADERS, rescore_budget // 2)))]
+    for k in range(rescore_budget if budget >= 2 * len(kept) + result.evaluations else 0):
+        leader = kept[k % len(kept)]
+        reward, cv, se = simulate(leader.x)
+        leader.rewards.append(reward)
+        leader.cvs.append(cv)
+        leader.cv_ses.append(se)
+    if kept[0].rewards:
+        best = max(kept, key=lambda leader: leader.mean_reward)
+    else:  # nothing re-scored: the belief is the search's own best evaluation
+        best = Leader(result.best_x, [result.best_reward])
     used = env.simulations - before
-    if used != result.evaluations or used > budget:
+    if used != result.evaluations + sum(len(k.rewards) for k in kept) or used > budget:
         raise RuntimeError(f"{method}: accounting mismatch ({used} steps, {result.evaluations} evaluations)")
-    return result, used, time.perf_counter() - started
+    return best, used, time.perf_counter() - started
 
 
 def run_baseline(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGET, seed: int = 0,
@@ -166,12 +239,11 @@ def run_baseline(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGE
     if method == "published":
         action, used, decide_s, extra = published_action(env), 0, 0.0, {}
     else:
-        result, used, decide_s = search_job(env, ctx, method, budget, seed)
-        action = result.best_x
-        m = result.best_metrics
-        extra = {"search_best_reward": result.best_reward,
-                 "search_best_cv_percent": m.get("cv_percent_at_target"),
-                 "search_best_effective_swath_m": m.get("effective_swath_m")}
+        best, used, decide_s = search_job(env, ctx, method, budget, seed)
+        action = best.x
+        cv, cv_se = best.cv_belief()
+        extra = {"search_best_reward": best.mean_reward, "search_best_cv_percent": cv,
+                 "search_best_cv_se_percent": cv_se, "search_rescores": len(best.rewards)}
     rows = []
     for episode in range(episodes):
         row = score_action(env, ctx, action, method, episode=episode, search_simulations=used,

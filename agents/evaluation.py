@@ -45,6 +45,7 @@ EVAL_SPINNER_MATERIAL = "mc"
 # episode k, with SCORE_SEED + 1000 k + i (different samples, the same for every method).
 SEARCH_SEED = 10_000
 SCORE_SEED = 20_000
+WORST_CV_PERCENT = 100.0  # the CV a run counts as when nothing landed on the trays
 
 
 def canonical_env_id(env_id: str) -> str:
@@ -151,6 +152,7 @@ class Row:
     settings: dict
     action: list
     cv_percent: Optional[float]
+    cv_standard_error_percent: Optional[float]
     effective_swath_m: float
     reward: float
     landed_fraction: float
@@ -178,12 +180,14 @@ def row_from_info(method: str, info: dict, reward: float, action, **kwargs) -> R
     metrics = info["metrics"]
     terms = info.get("reward_terms", {})
     cv = metrics.get("cv_percent_at_target")
+    cv_se = metrics.get("cv_standard_error_percent")
     return Row(
         method=method,
         context=dict(info["context"]),
         settings=dict(info["settings"]),
         action=[float(a) for a in np.asarray(action, dtype=float).reshape(-1)],
         cv_percent=None if cv is None else float(cv),
+        cv_standard_error_percent=None if cv_se is None else float(cv_se),
         effective_swath_m=float(metrics.get("effective_swath_m") or 0.0),
         reward=float(reward),
         landed_fraction=float(terms.get("landed_fraction", float("nan"))),
@@ -235,6 +239,8 @@ SUMMARY_COLUMNS = (
     ("method", "method"),
     ("jobs", "jobs"),
     ("cv_percent", "CV at target (%)"),
+    ("cv_standard_error_percent", "± SE (pp)"),
+    ("versus_best", "vs best"),
     ("effective_swath_m", "eff. swath (m)"),
     ("swath_error_m", "swath error (m)"),
     ("reward", "reward"),
@@ -242,8 +248,10 @@ SUMMARY_COLUMNS = (
     ("simulations", "sims in all"),
     ("decide_s", "decide (s / job)"),
     ("wall_s", "wall (s)"),
-    ("search_cv_percent", "CV on its search sample (%)"),
+    ("search_cv_percent", "CV the search believed (%)"),
+    ("search_cv_se_percent", "belief ± SE (pp)"),
 )
+TIE_STANDARD_ERRORS = 2.0  # differences smaller than this many standard errors are ties
 
 
 def _mean(values: Iterable[Optional[float]]) -> Optional[float]:
@@ -251,8 +259,17 @@ def _mean(values: Iterable[Optional[float]]) -> Optional[float]:
     return float(np.mean(vals)) if vals else None
 
 
-def summarise(method: str, rows: Sequence[Row], worst_cv: float = 100.0) -> dict:
-    """Means over the rows of one method. A run where nothing landed counts as CV `worst_cv`."""
+def _mean_se(values: Iterable[Optional[float]]) -> Optional[float]:
+    """Standard error of a mean of independent estimates with these standard errors."""
+    vals = [float(v) for v in values if v is not None and math.isfinite(float(v))]
+    return float(math.sqrt(sum(v * v for v in vals)) / len(vals)) if vals else None
+
+
+def summarise(method: str, rows: Sequence[Row], worst_cv: float = WORST_CV_PERCENT) -> dict:
+    """Means over the rows of one method. A run where nothing landed counts as CV `worst_cv`.
+
+    The CV's standard error is that of the mean over the rows, from each run's own
+    standard error (sampling noise; the jobs themselves are fixed)."""
     jobs = {(r.context["fertilizer"], r.context["target_swath_m"]) for r in rows}
     per_job_search = {}
     for r in rows:
@@ -267,6 +284,7 @@ def summarise(method: str, rows: Sequence[Row], worst_cv: float = 100.0) -> dict
         "jobs": len(jobs),
         "episodes": len(rows),
         "cv_percent": _mean(worst_cv if r.cv_percent is None else r.cv_percent for r in rows),
+        "cv_standard_error_percent": _mean_se(r.cv_standard_error_percent for r in rows),
         "effective_swath_m": _mean(r.effective_swath_m for r in rows),
         "swath_error_m": _mean(abs(r.effective_swath_m - r.context["target_swath_m"]) for r in rows),
         "reward": _mean(r.reward for r in rows),
@@ -275,10 +293,30 @@ def summarise(method: str, rows: Sequence[Row], worst_cv: float = 100.0) -> dict
         "decide_s": _mean(per_job_decide.values()),
         "wall_s": float(sum(per_job_decide.values())
                         + sum(r.wall_s - r.decide_s for r in rows)),
-        # searches: the best run as the search saw it, on its own granule sample (optimistic)
+        # searches: what the search believed of its choice (mean of its re-scores on fresh samples)
         "search_cv_percent": _mean(r.extra.get("search_best_cv_percent") for r in rows if r.episode == 0),
+        "search_cv_se_percent": _mean_se(r.extra.get("search_best_cv_se_percent") for r in rows
+                                         if r.episode == 0),
         "search_reward": _mean(r.extra.get("search_best_reward") for r in rows if r.episode == 0),
     }
+
+
+def mark_ties(summaries: Sequence[dict]) -> None:
+    """Set `versus_best` on each summary: "best", "tie" (within TIE_STANDARD_ERRORS combined
+    standard errors of the lowest CV) or "+x.x pp" (worse by more than that)."""
+    scored = [s for s in summaries if s.get("cv_percent") is not None]
+    if not scored:
+        return
+    best = min(scored, key=lambda s: s["cv_percent"])
+    for s in summaries:
+        if s.get("cv_percent") is None:
+            s["versus_best"] = None
+        elif s is best:
+            s["versus_best"] = "best"
+        else:
+            gap = s["cv_percent"] - best["cv_percent"]
+            se = math.hypot(s.get("cv_standard_error_percent") or 0.0, best.get("cv_standard_error_percent") or 0.0)
+            s["versus_best"] = "tie" if gap < TIE_STANDARD_ERRORS * se else f"+{gap:.1f} pp"
 
 
 def _cell(value: Any, digits: int = 4) -> str:
@@ -331,6 +369,7 @@ ROW_COLUMNS = (
     ("rpm", "rpm"),
     ("pitch_deg", "pitch (deg)"),
     ("cv_percent", "CV at target (%)"),
+    ("cv_standard_error_percent", "± SE (pp)"),
     ("effective_swath_m", "effective swath (m)"),
     ("reward", "reward"),
     ("search_simulations", "sims to decide"),

@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         s["method"] = titles.get(m, m)
         s["key"] = m
         summaries.append(s)
+    ev.mark_ties(summaries)
     elapsed = time.perf_counter() - started
     written = write_outputs(args.out, summaries, rows, order, titles, args, env_kwargs, elapsed)
     payload = {"budget": args.budget, "episodes": args.episodes, "env": env_id, "env_kwargs": env_kwargs,
