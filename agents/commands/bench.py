@@ -13,7 +13,7 @@ from pathlib import Path
 
 from spreadgym.report import format_table
 
-SECTIONS = ("spinner", "methods", "flight", "env", "cv-noise", "speed-accuracy", "stability")
+SECTIONS = ("spinner", "methods", "flight", "env", "references", "cv-noise", "targets", "speed-accuracy", "stability")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,24 +31,30 @@ def write_csv(rows: list[dict], path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from spreadgym.studies import benchmarks, stability
     from spreadgym.errors import SpreadgymError
+    from spreadgym.studies import benchmarks, estimate_bench, references, speed_accuracy, stability
 
     if args.repeats < 1:
         raise SpreadgymError(f"--repeats: {args.repeats} must be at least 1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+    def say(text: str) -> None:
+        print(text, file=sys.stderr)
+
     sections = args.only or list(SECTIONS)
     runners = {
         "spinner": lambda: benchmarks.spinner_benchmark(repeats=args.repeats),
         "methods": lambda: benchmarks.method_speed_benchmark(repeats=args.repeats),
         "flight": lambda: benchmarks.flight_benchmark(repeats=max(args.repeats, 5)),
         "env": lambda: env_steps_per_second(),
-        "cv-noise": lambda: benchmarks.cv_noise_benchmark(),
-        "speed-accuracy": lambda: benchmarks.speed_accuracy_benchmark(progress=lambda text: print(text, file=sys.stderr)),
+        "references": lambda: reference_rows(references, args.out / "references", say),
+        "cv-noise": lambda: estimate_bench.cv_noise_rows(),
+        "targets": lambda: estimate_bench.target_rows(args.out / "references", progress=say),
+        "speed-accuracy": lambda: speed_accuracy.speed_accuracy_rows(args.out / "references", progress=say),
         "stability": lambda: stability.stability_rows(
             stability.plot_stability_map(args.out.parent / "stability_map.png")),
     }
-    plots = {"cv-noise": benchmarks.plot_cv_noise, "speed-accuracy": benchmarks.plot_speed_accuracy}
+    plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy}
     for name in sections:
         rows = runners[name]()
         write_csv(rows, args.out / f"{name}.csv")
@@ -58,6 +64,18 @@ def run(args: argparse.Namespace) -> int:
         print(format_table([list(r.values()) for r in rows], list(rows[0])))
         print()
     return 0
+
+
+def reference_rows(references, out: Path, say) -> list[dict]:
+    """Converged references of the family (resumed from `out`), full and fast model, with tables."""
+    rows = []
+    for model in ("pymunk", "analytic"):
+        results = references.compute_references(out, model=model, progress=say)
+        references.write_table(results, out / f"{model}.md")
+        rows += [{"model": model, "scene": r["name"], "cv_percent": r["cv_percent_at_target"],
+                  "cv_standard_error_percent": r["cv_standard_error_percent"],
+                  "effective_swath_m": r["effective_swath_m"], "granules": r["granules"]} for r in results]
+    return rows
 
 
 def env_steps_per_second(steps: int = 40) -> list[dict]:
