@@ -34,14 +34,14 @@ from typing import Callable, Iterable, Optional, Sequence
 
 import numpy as np
 
-from spreadgym.physics.contacts import resolve_contacts
-from spreadgym.errors import SpreadgymError
-from spreadgym.physics.granules import sample_granules
 from spreadgym.config.materials import load_library
-from spreadgym.physics.departure import Departure
-from spreadgym.physics.selection import choose_model
-from spreadgym.physics.analytic.vane_slide import run_along_vane
 from spreadgym.config.scene import RPM_TO_RAD_S, Scene, load_scene
+from spreadgym.errors import SpreadgymError
+from spreadgym.physics.analytic.vane_slide import run_along_vane
+from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.physics.departure import Departure
+from spreadgym.physics.granules import sample_granules
+from spreadgym.physics.selection import choose_model
 
 SCENE = "paper"
 ROTATIONS = ("free", "locked")

@@ -31,14 +31,14 @@ from typing import Optional, Sequence
 import numpy as np
 import pymunk
 
-from spreadgym.spread import flight as flight_model
-from spreadgym.physics.calibration import critical_time_step, damping_ratio, paper_table_consistency, sphere_mass
 from spreadgym.config.materials import MaterialLibrary, load_library
+from spreadgym.config.scene import Flight, Scene, load_scene
+from spreadgym.physics.calibration import critical_time_step, damping_ratio, paper_table_consistency, sphere_mass
 from spreadgym.physics.disc_friction import disc_surface_velocity, friction_velocity_change
 from spreadgym.physics.numerics import choose_time_step, collision_bias_for, tunnelling_limit_s
 from spreadgym.physics.stepped.spring_damper import CONTACT_STEPS, CRITICAL_SAFETY, impact_rebound
 from spreadgym.physics.vertical import GRAVITY_M_S2
-from spreadgym.config.scene import Flight, Scene, load_scene
+from spreadgym.spread import flight as flight_model
 
 PAPER_DT_S = 5e-5  # the time step the seed paper used in RecurDyn
 PUSHED_FRACTION = 0.5  # a granule counts as pushed when it moves on at >= this x omega r
