@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         "env": lambda: env_steps_per_second(),
         "references": lambda: reference_rows(references, args.out / "references", say),
         "cv-noise": lambda: estimate_bench.cv_noise_rows(),
-        "targets": lambda: estimate_bench.target_rows(args.out / "references", progress=say),
+        "targets": lambda: target_rows(estimate_bench, args.out, say),
         "speed-accuracy": lambda: speed_accuracy.speed_accuracy_rows(args.out / "references", progress=say),
         "stability": lambda: stability.stability_rows(
             stability.plot_stability_map(args.out.parent / "stability_map.png")),
@@ -75,6 +75,15 @@ def reference_rows(references, out: Path, say) -> list[dict]:
         rows += [{"model": model, "scene": r["name"], "cv_percent": r["cv_percent_at_target"],
                   "cv_standard_error_percent": r["cv_standard_error_percent"],
                   "effective_swath_m": r["effective_swath_m"], "granules": r["granules"]} for r in results]
+    return rows
+
+
+def target_rows(estimate_bench, out: Path, say) -> list[dict]:
+    """The estimate's targets on every reference scene, full and fast model; also as markdown."""
+    rows = []
+    for model in ("pymunk", "analytic"):
+        rows += estimate_bench.target_rows(out / "references", model=model, progress=say)
+    (out / "estimate-targets.md").write_text(estimate_bench.targets_markdown(rows), encoding="utf-8")
     return rows
 
 

@@ -121,3 +121,27 @@ def target_rows(references_dir: Path, model: str = "pymunk", seeds: int = 10, na
             "wall_median_s": statistics.median(walls),
         })
     return rows
+
+
+TARGET_BIAS_PP = 0.3  # issue targets: |mean - converged| and s.d. over seeds, pp
+TARGET_SD_PP = 0.3
+TARGET_SWATH_SHARE = 0.9
+
+
+def targets_markdown(rows: list[dict]) -> str:
+    """The target table: one line per scene and model, each target marked met or not."""
+    def mark(ok: bool) -> str:
+        return "yes" if ok else "**no**"
+
+    lines = ["| scene | model | converged CV (%) | mean of one run (%) | bias (pp, ± SE) | bias ok | "
+             "s.d. (pp) | s.d. ok | swath equal (of seeds) | wall (ms, median) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        bias_ok = abs(r["bias_pp"]) <= TARGET_BIAS_PP
+        bias_se = (r["bias_se_pp"] ** 2 + r["converged_se_percent"] ** 2) ** 0.5  # the reference is uncertain too
+        lines.append(
+            f"| {r['scene']} | {r['model']} | {r['converged_cv_percent']:.2f} ± {r['converged_se_percent']:.2f} | "
+            f"{r['mean_cv_percent']:.2f} | {r['bias_pp']:+.2f} ± {bias_se:.2f} | {mark(bias_ok)} | "
+            f"{r['sd_pp']:.2f} | {mark(r['sd_pp'] <= TARGET_SD_PP)} | {r['swath_equal_seeds']}/{r['seeds']} | "
+            f"{1e3 * r['wall_median_s']:.0f} |")
+    return "\n".join(lines) + "\n"
