@@ -12,8 +12,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Mapping, Optional
 
-from spreadgym.errors import MaterialError
 from spreadgym.config.resources import config_dir, read_yaml
+from spreadgym.errors import MaterialError
 
 PAIR_QUANTITIES = ("friction", "restitution", "impact_time_s")
 

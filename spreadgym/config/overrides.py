@@ -7,6 +7,7 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 
+from spreadgym.config.resources import parse_yaml
 from spreadgym.errors import ConfigError
 
 
@@ -17,9 +18,10 @@ def parse_assignment(text: str) -> tuple[str, Any]:
     if not sep or not key:
         raise ConfigError("--set", f"expected KEY=VALUE, got {text!r}")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else None
+        value = parse_yaml(raw) if raw.strip() else None
     except yaml.YAMLError as exc:
-        raise ConfigError(key, f"value {raw!r} is not valid YAML ({exc})") from exc
+        problem = getattr(exc, "problem", None) or type(exc).__name__
+        raise ConfigError(key, f"value {raw!r} is not valid YAML: {problem}") from exc
     return key, value
 
 
@@ -36,6 +38,8 @@ def apply_overrides(config: Mapping[str, Any], assignments: Mapping[str, Any]) -
         for depth, part in enumerate(parts):
             where = ".".join(parts[: depth + 1])
             if isinstance(node, list):
+                if not node:
+                    raise ConfigError(where, "the list is empty here; set the whole list instead")
                 if not part.isdigit() or int(part) >= len(node):
                     raise ConfigError(where, f"list index must be 0..{len(node) - 1}")
                 part = int(part)

@@ -8,28 +8,31 @@ Validation errors name the dotted key, the bad value and the allowed range.
 from __future__ import annotations
 
 import math
-import re
-from typing import Any, Literal, Mapping, Optional, Union
+from typing import Annotated, Any, Literal, Mapping, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
-from spreadgym.errors import ConfigError
+from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.config.resources import read_yaml, resolve_named
+from spreadgym.errors import ConfigError
 
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 MAX_RPM = 5000.0
 MAX_PITCH_DEG = 60.0
+MAX_TIP_SPEED_M_S = 100.0  # disc rim speed; spreaders run 15-45 m/s, beyond 100 throws leave any field
+MAX_WIND_M_S = 20.0  # each component; nobody spreads in a gale, and the flight stays bounded
+MAX_ANGLE_DEG = 360.0
+MAX_PLANE_M = 5.0  # plates and feed points lie within this distance of the disc axis
+MIN_DT_S = 1e-6  # far below every model's automatic step (5e-5 to 2e-4 s): smaller only costs time
+WindComponent = Annotated[Real, Field(ge=-MAX_WIND_M_S, le=MAX_WIND_M_S)]
+Angle = Annotated[Real, Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG)]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class Spinner(_Strict):
-    radius_m: float = Field(gt=0, le=2.0, description="disc radius")
-    rpm: float = Field(gt=0, le=MAX_RPM, description="disc speed, revolutions per minute")
-    height_m: float = Field(ge=0, le=5.0, description="disc height above ground")
+class Spinner(StrictModel):
+    radius_m: Real = Field(gt=0, le=2.0, description="disc radius")
+    rpm: Real = Field(gt=0, le=MAX_RPM, description="disc speed, revolutions per minute")
+    height_m: Real = Field(ge=0, le=5.0, description="disc height above ground")
     direction: Literal["ccw", "cw"] = Field(description="sense of rotation seen from above")
     material: str
 
@@ -40,15 +43,15 @@ class Spinner(_Strict):
         return sign * self.rpm * RPM_TO_RAD_S
 
 
-class Vanes(_Strict):
-    count: int = Field(ge=1, le=16)
-    inner_radius_m: float = Field(ge=0)
-    outer_radius_m: Optional[float] = Field(default=None, gt=0, description="default: disc radius")
-    thickness_m: float = Field(gt=0, le=0.05)
-    pitch_deg: Union[float, list[float]] = Field(
+class Vanes(StrictModel):
+    count: Integer = Field(ge=1, le=16)
+    inner_radius_m: Real = Field(ge=0, le=2.0)
+    outer_radius_m: Optional[Real] = Field(default=None, gt=0, description="default: disc radius")
+    thickness_m: Real = Field(gt=0, le=0.05)
+    pitch_deg: Union[Real, list[Real]] = Field(
         default=0.0, description="angle from radial, + = tip leans in the direction of rotation"
     )
-    height_m: float = Field(default=0.03, gt=0, description="vane height (plan view: informational)")
+    height_m: Real = Field(default=0.03, gt=0, le=0.5, description="vane height (plan view: informational)")
     material: Optional[str] = Field(default=None, description="default: spinner material")
 
     @model_validator(mode="after")
@@ -70,47 +73,54 @@ class Vanes(_Strict):
         return [math.radians(self.pitch_deg)] * self.count
 
 
-class Feed(_Strict):
-    radius_m: float = Field(ge=0, description="release radius from the spinner axis")
-    angle_deg: float = Field(description="release angle in the machine frame, from +x, ccw")
-    spread_m: float = Field(default=0.0, ge=0, description="s.d. of the release point, each axis")
-    drop_height_m: float = Field(ge=0, le=1.0, description="release height above the disc")
+class Feed(StrictModel):
+    radius_m: Real = Field(ge=0, le=2.0, description="release radius from the spinner axis")
+    angle_deg: Real = Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG, description="release angle in the machine frame, from +x, ccw")
+    spread_m: Real = Field(default=0.0, ge=0, le=2.0, description="s.d. of the release point, each axis; at most the disc radius")
+    drop_height_m: Real = Field(ge=0, le=1.0, description="release height above the disc")
 
     @property
     def angle_rad(self) -> float:
         return math.radians(self.angle_deg)
 
 
-class Granule(_Strict):
-    diameter_m: Optional[float] = Field(default=None, gt=0, le=0.02, description="default: fertilizer d50")
-    diameter_sd_m: Optional[float] = Field(default=None, ge=0, le=0.01, description="default: fertilizer")
+class Granule(StrictModel):
+    diameter_m: Optional[Real] = Field(default=None, gt=0, le=0.02, description="default: fertilizer d50")
+    diameter_sd_m: Optional[Real] = Field(default=None, ge=0, le=0.01, description="default: fertilizer")
     rotation: Literal["free", "locked"] = "free"
 
 
-class Contact(_Strict):
+class Contact(StrictModel):
     """Overrides of the library's pair values; null uses the library."""
 
-    disc_friction: Optional[float] = Field(default=None, ge=0, le=2.0)
-    vane_friction: Optional[float] = Field(default=None, ge=0, le=2.0)
-    vane_restitution: Optional[float] = Field(default=None, ge=0, le=1.0)
-    disc_restitution: Optional[float] = Field(default=None, ge=0, le=1.0)
-    vane_contact_time_s: Optional[float] = Field(default=None, gt=0, le=0.01)
+    disc_friction: Optional[Real] = Field(default=None, ge=0, le=2.0)
+    vane_friction: Optional[Real] = Field(default=None, ge=0, le=2.0)
+    vane_restitution: Optional[Real] = Field(default=None, ge=0, le=1.0)
+    disc_restitution: Optional[Real] = Field(default=None, ge=0, le=1.0)
+    vane_contact_time_s: Optional[Real] = Field(default=None, gt=0, le=0.01)
 
 
-class Deflector(_Strict):
+class Deflector(StrictModel):
     """A fixed straight plate in the machine frame, outside the disc."""
 
-    x_m: float = Field(description="plate centre, machine frame")
-    y_m: float
-    angle_deg: float = Field(description="plate direction from +x, ccw")
-    length_m: float = Field(gt=0, le=2.0)
-    thickness_m: float = Field(default=0.003, gt=0, le=0.05)
+    x_m: Real = Field(ge=-MAX_PLANE_M, le=MAX_PLANE_M, description="plate centre, machine frame")
+    y_m: Real = Field(ge=-MAX_PLANE_M, le=MAX_PLANE_M)
+    angle_deg: Real = Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG, description="plate direction from +x, ccw")
+    length_m: Real = Field(ge=0.001, le=2.0)
+    thickness_m: Real = Field(default=0.003, gt=0, le=0.05)
     material: str
-    friction: Optional[float] = Field(default=None, ge=0, le=2.0)
-    restitution: Optional[float] = Field(default=None, ge=0, le=1.0)
-    angle_range_deg: Optional[tuple[float, float]] = Field(
-        default=None, description="if set, environments may turn the plate within this range"
+    friction: Optional[Real] = Field(default=None, ge=0, le=2.0)
+    restitution: Optional[Real] = Field(default=None, ge=0, le=1.0)
+    angle_range_deg: Optional[tuple[Angle, Angle]] = Field(
+        default=None, description="if set, environments may turn the plate within this range (low, high)"
     )
+
+    @model_validator(mode="after")
+    def _range_ordered(self) -> "Deflector":
+        if self.angle_range_deg is not None and self.angle_range_deg[0] > self.angle_range_deg[1]:
+            lo, hi = self.angle_range_deg
+            raise ValueError(f"angle_range_deg: [{lo:g}, {hi:g}] is reversed; give [low, high]")
+        return self
 
     def endpoints(self) -> tuple[tuple[float, float], tuple[float, float]]:
         """The plate's two end points (m) in the machine frame."""
@@ -119,18 +129,18 @@ class Deflector(_Strict):
         return (self.x_m - dx, self.y_m - dy), (self.x_m + dx, self.y_m + dy)
 
 
-class Flight(_Strict):
-    drag_coefficient: float = Field(default=0.44, ge=0, le=2.0)
-    air_density_kg_m3: float = Field(default=1.2, ge=0, le=2.0)
-    forward_speed_m_s: float = Field(default=0.0, ge=0, le=20.0, description="machine speed along +y")
-    wind_m_s: tuple[float, float] = Field(default=(0.0, 0.0), description="wind (x, y) over ground")
+class Flight(StrictModel):
+    drag_coefficient: Real = Field(default=0.44, ge=0, le=2.0)
+    air_density_kg_m3: Real = Field(default=1.2, ge=0, le=2.0)
+    forward_speed_m_s: Real = Field(default=0.0, ge=0, le=20.0, description="machine speed along +y")
+    wind_m_s: tuple[WindComponent, WindComponent] = Field(default=(0.0, 0.0), description="wind (x, y) over ground")
 
 
-class Pattern(_Strict):
-    tray_width_m: float = Field(default=0.5, gt=0, le=5.0)
+class Pattern(StrictModel):
+    tray_width_m: Real = Field(default=0.5, ge=0.05, le=5.0)
     driving: Literal["racetrack", "back-and-forth"] = "racetrack"
-    cv_threshold_percent: float = Field(default=15.0, gt=0, le=100.0)
-    target_swath_m: float = Field(gt=0, le=100.0)
+    cv_threshold_percent: Real = Field(default=15.0, gt=0, le=100.0)
+    target_swath_m: Real = Field(gt=0, le=100.0)
 
     @model_validator(mode="after")
     def _target_on_tray_grid(self) -> "Pattern":
@@ -143,18 +153,18 @@ class Pattern(_Strict):
         return self
 
 
-class Sim(_Strict):
-    granules: int = Field(ge=1, le=1_000_000)
-    dt_s: Optional[float] = Field(default=None, gt=0, le=0.01, description="null: chosen from the scene")
-    seed: int = Field(default=0, ge=0)
+class Sim(StrictModel):
+    granules: Integer = Field(ge=1, le=1_000_000)
+    dt_s: Optional[Real] = Field(default=None, ge=MIN_DT_S, le=0.01, description="null: chosen from the scene")
+    seed: Integer = Field(default=0, ge=0)
     sampler: Literal["qmc", "mc"] = Field(
         default="qmc", description="qmc: scrambled Sobol points per replicate; mc: independent uniform draws")
-    replicates: int = Field(default=8, ge=1, le=4096,
+    replicates: Integer = Field(default=8, ge=1, le=4096,
                             description="independent replicates per run (the CV's bias correction and "
                                         "standard error rest on them); the most that divide sim.granules")
 
 
-class Scene(_Strict):
+class Scene(StrictModel):
     name: str
     description: str = ""
     fertilizer: str
@@ -178,6 +188,12 @@ class Scene(_Strict):
             raise ValueError(
                 f"vanes.inner_radius_m: {self.vanes.inner_radius_m} m must be below the outer radius {outer} m"
             )
+        tip_speed = abs(self.spinner.omega_rad_s) * radius
+        if tip_speed > MAX_TIP_SPEED_M_S:
+            raise ValueError(f"spinner.rpm: {self.spinner.rpm:g} rpm on a {radius:g} m disc is a rim speed of "
+                             f"{tip_speed:.0f} m/s; allowed up to {MAX_TIP_SPEED_M_S:g} m/s")
+        if self.feed.spread_m > radius:
+            raise ValueError(f"feed.spread_m: {self.feed.spread_m:g} m is wider than the disc radius {radius:g} m")
         if self.feed.radius_m >= radius:
             raise ValueError(f"feed.radius_m: {self.feed.radius_m} m must be inside the disc radius {radius} m")
         for i, plate in enumerate(self.deflectors):
@@ -197,20 +213,9 @@ class Scene(_Strict):
 def _segment_distance_to_origin(a: tuple[float, float], b: tuple[float, float]) -> float:
     ax, ay = a
     dx, dy = b[0] - ax, b[1] - ay
-    t = max(0.0, min(1.0, -(ax * dx + ay * dy) / (dx * dx + dy * dy)))
+    length2 = dx * dx + dy * dy
+    t = max(0.0, min(1.0, -(ax * dx + ay * dy) / length2)) if length2 > 0 else 0.0
     return math.hypot(ax + t * dx, ay + t * dy)
-
-
-def _format_validation_error(exc: ValidationError) -> ConfigError:
-    first = exc.errors()[0]
-    key = ".".join(str(p) for p in first["loc"]) or "scene"
-    message = first["msg"].removeprefix("Value error, ")
-    named = re.match(r"^([\w.\[\]]+): (.*)$", message, flags=re.S)
-    if named and key == "scene":  # whole-scene checks name their key in the message
-        key, message = named.groups()
-    if first["type"] != "value_error":
-        message += f" (got {first.get('input')!r})"
-    return ConfigError(key, message)
 
 
 def scene_from_dict(raw: Mapping[str, Any]) -> Scene:
@@ -218,7 +223,7 @@ def scene_from_dict(raw: Mapping[str, Any]) -> Scene:
     try:
         return Scene.model_validate(dict(raw))
     except ValidationError as exc:
-        raise _format_validation_error(exc) from None
+        raise format_validation_error(exc, Scene, "scene") from None
 
 
 def load_scene_dict(name_or_path: str = "paper") -> dict:

@@ -27,7 +27,7 @@ from spreadgym.config.scene import load_scene
         ({"vanes.pitch_deg": 75.0}, "vanes", "outside [-60.0, 60.0]"),
         ({"feed.radius_m": 0.2}, "feed.radius_m", "inside the disc radius"),
         ({"pattern.target_swath_m": 3.2}, "pattern", "not a positive multiple of tray_width_m"),
-        ({"pattern.tray_width_m": 0.0}, "pattern.tray_width_m", "greater than 0"),
+        ({"pattern.tray_width_m": 0.0}, "pattern.tray_width_m", "allowed: >= 0.05, <= 5"),
         ({"pattern.driving": "spiral"}, "pattern.driving", "'racetrack' or 'back-and-forth'"),
         ({"spinner.height_m": -0.1}, "spinner.height_m", "greater than or equal to 0"),
         ({"granule.rotation": "wobbly"}, "granule.rotation", "'free' or 'locked'"),

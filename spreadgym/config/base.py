@@ -1,0 +1,85 @@
+"""The one strict base of every config model, its number types and its error message.
+
+Every config section (scenes, environments, training runs) derives from `StrictModel`:
+unknown keys are errors, values are frozen, and no float may be NaN or infinite.
+Numbers are strict: `true` is not a number and `"200"` is not an integer (YAML and
+`--set` parse numbers themselves), while an integer is accepted where a float is due.
+`format_validation_error` turns pydantic's first complaint into one `ConfigError` line
+naming the dotted key, the bad value and the allowed range.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated, Any, Optional
+
+import annotated_types
+from pydantic import BaseModel, ConfigDict, Strict, ValidationError
+
+from spreadgym.errors import ConfigError
+
+Real = Annotated[float, Strict()]  # a finite number; ints accepted, bools and strings not
+Integer = Annotated[int, Strict()]  # an int; bools, floats and strings not
+
+
+class StrictModel(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+_BOUNDS = {annotated_types.Ge: (">=", "ge"), annotated_types.Gt: (">", "gt"), annotated_types.Le: ("<=", "le"),
+           annotated_types.Lt: ("<", "lt")}
+
+
+def field_range(model: type[BaseModel], loc: tuple) -> Optional[str]:
+    """The bounds declared on the field at `loc` (e.g. ">= 0, <= 5000"), or None."""
+    current: Any = model
+    field = None
+    for part in loc:
+        if isinstance(part, int) or not (isinstance(current, type) and issubclass(current, BaseModel)):
+            continue
+        field = current.model_fields.get(str(part))
+        if field is None:
+            return None
+        current = _model_inside(field.annotation)
+    if field is None:
+        return None
+    bounds = []
+    for meta in field.metadata:
+        for kind, (symbol, attribute) in _BOUNDS.items():
+            if isinstance(meta, kind):
+                bounds.append(f"{symbol} {getattr(meta, attribute):g}")
+    return ", ".join(bounds) or None
+
+
+def _model_inside(annotation: Any) -> Any:
+    """The BaseModel class inside an annotation such as Optional[M] or list[M], if any."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in getattr(annotation, "__args__", ()) or ():
+        found = _model_inside(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def format_validation_error(exc: ValidationError, model: type[BaseModel], root: str) -> ConfigError:
+    """The first problem of `exc` as one line: dotted key, what is wrong, what is allowed."""
+    first = exc.errors()[0]
+    loc = tuple(first["loc"])
+    key = ".".join(str(p) for p in loc) or root
+    message = first["msg"].removeprefix("Value error, ")
+    named = re.match(r"^([\w.\[\]]+): (.*)$", message, flags=re.S)
+    if named:  # model checks name their key in the message, relative to the model
+        inner, message = named.groups()
+        key = inner if key == root else f"{key}.{inner}"
+    if first["type"] == "missing":
+        return ConfigError(key, "missing (required)")
+    if first["type"] != "value_error":
+        value = first.get("input")
+        shown = repr(value) if not isinstance(value, (dict, list)) or len(repr(value)) < 80 else type(value).__name__
+        message += f" (got {shown})"
+        allowed = field_range(model, loc)
+        if allowed and first["type"] in {"greater_than", "greater_than_equal", "less_than", "less_than_equal",
+                                          "finite_number"}:
+            message += f"; allowed: {allowed}"
+    return ConfigError(key, message)

@@ -1,0 +1,76 @@
+"""Regression tests of issue 15's config findings: every number finite, typed and in range,
+every message one line naming the key and what is allowed."""
+
+import pytest
+
+from spreadgym.config.overrides import parse_assignment
+from spreadgym.config.resources import parse_yaml, read_yaml
+from spreadgym.config.scene import load_scene
+from spreadgym.errors import ConfigError
+
+
+@pytest.mark.parametrize(
+    "assignment, key, fragment",
+    [
+        ("flight.wind_m_s=[.nan,0]", "flight.wind_m_s.0", "finite"),
+        ("flight.wind_m_s=[.inf,0]", "flight.wind_m_s.0", "finite"),
+        ("flight.wind_m_s=[1e6,0]", "flight.wind_m_s.0", "less than or equal to 20"),
+        ("flight.wind_m_s=[1000,1000]", "flight.wind_m_s.0", "less than or equal to 20"),
+        ("sim.dt_s=1e-12", "sim.dt_s", "allowed: >= 1e-06"),
+        ("deflectors.0.length_m=1e-300", "deflectors.0.length_m", ">= 0.001"),
+        ("deflectors.0.x_m=.nan", "deflectors.0.x_m", "finite"),
+        ("deflectors.0.x_m=.inf", "deflectors.0.x_m", "finite"),
+        ("deflectors.0.angle_deg=.nan", "deflectors.0.angle_deg", "finite"),
+        ("deflectors.0.angle_range_deg=[100,20]", "deflectors.0.angle_range_deg", "reversed"),
+        ("feed.angle_deg=.inf", "feed.angle_deg", "allowed: >= -360, <= 360"),
+        ("feed.angle_deg=.nan", "feed.angle_deg", "finite"),
+        ("feed.spread_m=.inf", "feed.spread_m", "finite"),
+        ("feed.spread_m=1e9", "feed.spread_m", "<= 2"),
+        ("feed.spread_m=0.5", "feed.spread_m", "wider than the disc radius"),
+        ("spinner.rpm=true", "spinner.rpm", "valid number (got True)"),
+        ("spinner.rpm=.nan", "spinner.rpm", "allowed: > 0, <= 5000"),
+        ('sim.granules="200"', "sim.granules", "valid integer"),
+        ("sim.granules=200.0", "sim.granules", "valid integer"),
+    ],
+)
+def test_bad_values_are_refused_with_the_key_and_the_range(assignment, key, fragment):
+    with pytest.raises(ConfigError) as err:
+        load_scene("paper-deflectors", dict([parse_assignment(assignment)]))
+    assert err.value.key == key and fragment in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_the_rim_speed_is_bounded():
+    with pytest.raises(ConfigError, match="spinner.rpm: 5000 rpm on a 0.3 m disc is a rim speed of 157 m/s"):
+        load_scene("field", {"spinner.rpm": 5000})
+
+
+def test_numbers_in_exponent_form_are_numbers():
+    assert parse_yaml("[1e9, 2e-4, -3E+2, 1.5, .inf]") == [1e9, 2e-4, -300.0, 1.5, float("inf")]
+    assert parse_assignment("sim.dt_s=2e-4") == ("sim.dt_s", 2e-4)
+    assert load_scene("paper", {"sim.dt_s": 2e-4}).sim.dt_s == 2e-4
+
+
+def test_file_problems_are_one_line(tmp_path):
+    latin = tmp_path / "latin.yaml"
+    latin.write_bytes("name: caf\xe9\n".encode("latin-1"))
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("a: [1, 2\nb: 3\n")
+    for path, fragment in ((latin, "not UTF-8"), (broken, "not valid YAML at line"), (tmp_path, "is a folder")):
+        with pytest.raises(ConfigError) as err:
+            read_yaml(path) if path.suffix else load_scene(str(path))
+        assert fragment in str(err.value) and "\n" not in str(err.value)
+
+
+def test_an_index_into_an_empty_list_says_so():
+    with pytest.raises(ConfigError, match="the list is empty here"):
+        load_scene("paper", {"deflectors.0.angle_deg": 10.0})
+
+
+def test_a_missing_section_is_named_without_printing_the_scene(tmp_path):
+    raw = (tmp_path / "s.yaml")
+    text = (load_scene.__globals__["resolve_named"]("scenes", "paper")).read_text()
+    raw.write_text(text.split("pattern:")[0] + "sim:\n  granules: 10\n")
+    with pytest.raises(ConfigError) as err:
+        load_scene(str(raw))
+    assert str(err.value) == "pattern: missing (required)"
