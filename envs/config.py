@@ -23,17 +23,14 @@ import copy
 import math
 from typing import Any, Literal, Mapping, Optional
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator
 
+from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error
 from spreadgym.errors import ConfigError
 from spreadgym.config.resources import read_yaml, resolve_named
 
 DESIGN = "spinner_design"
 TUNING = "spreader_tuning"
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
 
 def _check_range(value: tuple[float, float], lo: float, hi: float, unit: str) -> tuple[float, float]:
@@ -47,15 +44,15 @@ def _check_range(value: tuple[float, float], lo: float, hi: float, unit: str) ->
     return a, b
 
 
-class ContextConfig(_Strict):
+class ContextConfig(StrictModel):
     """What `reset` samples (uniformly) with the env's `np_random`."""
 
     fertilizers: list[str] = Field(min_length=1, description="library names, one drawn per episode")
     spinner_materials: list[str] = Field(min_length=1, description="library surfaces, one drawn per episode")
-    target_swath_m: tuple[float, float] = Field(description="range; the draw is a multiple of the tray width")
-    forward_speed_m_s: tuple[float, float] = (0.0, 0.0)
-    wind_x_m_s: tuple[float, float] = (0.0, 0.0)
-    wind_y_m_s: tuple[float, float] = (0.0, 0.0)
+    target_swath_m: tuple[Real, Real] = Field(description="range; the draw is a multiple of the tray width")
+    forward_speed_m_s: tuple[Real, Real] = (0.0, 0.0)
+    wind_x_m_s: tuple[Real, Real] = (0.0, 0.0)
+    wind_y_m_s: tuple[Real, Real] = (0.0, 0.0)
 
     @field_validator("target_swath_m")
     @classmethod
@@ -76,11 +73,11 @@ class ContextConfig(_Strict):
         return _check_range(v, -30.0, 30.0, "m/s")
 
 
-class SettingsConfig(_Strict):
+class SettingsConfig(StrictModel):
     """Ranges of the settings the action chooses (action -1 maps to the lower end)."""
 
-    rpm: tuple[float, float] = (200.0, 1100.0)
-    pitch_deg: tuple[float, float] = (-30.0, 30.0)
+    rpm: tuple[Real, Real] = (200.0, 1100.0)
+    pitch_deg: tuple[Real, Real] = (-30.0, 30.0)
     pitch_per_vane: bool = Field(default=False, description="one pitch per vane instead of a shared one")
     deflectors: bool = Field(default=True, description="adjustable deflectors (angle_range_deg) are actions")
 
@@ -98,50 +95,50 @@ class SettingsConfig(_Strict):
         return _check_range(v, -60.0, 60.0, "deg")
 
 
-class RewardConfig(_Strict):
+class RewardConfig(StrictModel):
     """Weights of the penalty terms (see docs/environments.md)."""
 
-    cv_weight: float = Field(default=1.0, ge=0.0, le=1e3)
-    swath_weight: float = Field(default=0.5, ge=0.0, le=1e3)
-    retained_weight: float = Field(default=1.0, ge=0.0, le=1e3)
-    cv_worst_percent: float = Field(default=100.0, gt=0.0, le=1e4, description="CV that scores as worst")
+    cv_weight: Real = Field(default=1.0, ge=0.0, le=1e3)
+    swath_weight: Real = Field(default=0.5, ge=0.0, le=1e3)
+    retained_weight: Real = Field(default=1.0, ge=0.0, le=1e3)
+    cv_worst_percent: Real = Field(default=100.0, gt=0.0, le=1e4, description="CV that scores as worst")
 
 
 class TuningRewardConfig(RewardConfig):
-    step_cost: float = Field(default=0.05, ge=0.0, le=1e3, description="subtracted every step")
-    goal_bonus: float = Field(default=1.0, ge=0.0, le=1e3, description="added on the step that reaches the goal")
+    step_cost: Real = Field(default=0.05, ge=0.0, le=1e3, description="subtracted every step")
+    goal_bonus: Real = Field(default=1.0, ge=0.0, le=1e3, description="added on the step that reaches the goal")
 
 
-class FallbackRestitution(_Strict):
+class FallbackRestitution(StrictModel):
     """Restitution used only for pairs the library did not measure (and the scene does not set)."""
 
-    disc: float = Field(default=0.43, ge=0.0, le=1.0)
-    vane: float = Field(default=0.43, ge=0.0, le=1.0)
-    deflector: float = Field(default=0.43, ge=0.0, le=1.0)
+    disc: Real = Field(default=0.43, ge=0.0, le=1.0)
+    vane: Real = Field(default=0.43, ge=0.0, le=1.0)
+    deflector: Real = Field(default=0.43, ge=0.0, le=1.0)
 
 
-class RenderConfig(_Strict):
-    width_px: int = Field(default=640, ge=64, le=4096)
-    height_px: int = Field(default=640, ge=64, le=4096)
-    trajectories: int = Field(default=150, ge=0, le=100_000, description="granule flights drawn (field view)")
-    disc_tracks: int = Field(
+class RenderConfig(StrictModel):
+    width_px: Integer = Field(default=640, ge=64, le=4096)
+    height_px: Integer = Field(default=640, ge=64, le=4096)
+    trajectories: Integer = Field(default=150, ge=0, le=100_000, description="granule flights drawn (field view)")
+    disc_tracks: Integer = Field(
         default=10, ge=0, le=1000, description="granule paths over the disc recorded for the picture (render modes only)"
     )
 
 
-class ObservationConfig(_Strict):
+class ObservationConfig(StrictModel):
     """The measured pattern in the tuning env's observation."""
 
-    single_pass_bins: int = Field(default=40, ge=1, le=1000)
-    single_pass_half_width_m: float = Field(default=10.0, gt=0.0, le=200.0)
-    bout_bins: int = Field(default=16, ge=1, le=1000)
+    single_pass_bins: Integer = Field(default=40, ge=1, le=1000)
+    single_pass_half_width_m: Real = Field(default=10.0, gt=0.0, le=200.0)
+    bout_bins: Integer = Field(default=16, ge=1, le=1000)
 
 
-class DesignConfig(_Strict):
+class DesignConfig(StrictModel):
     scene: str = Field(default="paper", description="shipped scene name or YAML path")
     scene_overrides: dict[str, Any] = Field(default_factory=dict, description="dotted scene keys")
     model: str = Field(default="analytic", description="spinner model (see spreadgym.physics.selection)")
-    granules: int = Field(default=2000, ge=1, le=1_000_000, description="granules per simulation")
+    granules: Integer = Field(default=2000, ge=1, le=1_000_000, description="granules per simulation")
     confidence_interval: bool = Field(default=False, description="bootstrap CI of the CV in info (slower)")
     fallback_restitution: FallbackRestitution = FallbackRestitution()
     context: ContextConfig
@@ -152,9 +149,9 @@ class DesignConfig(_Strict):
 
 class TuningConfig(DesignConfig):
     reward: TuningRewardConfig = TuningRewardConfig()
-    max_steps: int = Field(default=20, ge=1, le=100_000, description="truncation after this many steps")
-    goal_cv_percent: float = Field(default=15.0, gt=0.0, le=1e4, description="terminate at or below")
-    max_change: float = Field(
+    max_steps: Integer = Field(default=20, ge=1, le=100_000, description="truncation after this many steps")
+    goal_cv_percent: Real = Field(default=15.0, gt=0.0, le=1e4, description="terminate at or below")
+    max_change: Real = Field(
         default=0.25, gt=0.0, le=2.0,
         description="largest change per step, in normalised setting units (the full range is 2)",
     )
@@ -167,22 +164,11 @@ class TuningConfig(DesignConfig):
 SCHEMAS: dict[str, type[DesignConfig]] = {DESIGN: DesignConfig, TUNING: TuningConfig}
 
 
-def _format(exc: ValidationError) -> ConfigError:
-    first = exc.errors()[0]
-    key = ".".join(str(p) for p in first["loc"]) or "config"
-    message = first["msg"].removeprefix("Value error, ")
-    if first["type"] == "extra_forbidden":
-        message = "unknown key"
-    elif first["type"] != "value_error":
-        message += f" (got {first.get('input')!r})"
-    return ConfigError(key, message)
-
-
 def _validate(schema: type[DesignConfig], raw: Mapping[str, Any]) -> DesignConfig:
     try:
         return schema.model_validate(dict(raw))
     except ValidationError as exc:
-        raise _format(exc) from None
+        raise format_validation_error(exc, schema, "config") from None
 
 
 def _sections(schema: type[BaseModel]) -> set[str]:

@@ -11,6 +11,7 @@ import os
 import sys
 from pathlib import Path
 
+from spreadgym.cli import arguments
 from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "cv-noise", "targets", "speed-accuracy", "stability")
@@ -18,8 +19,8 @@ SECTIONS = ("spinner", "methods", "flight", "env", "references", "cv-noise", "ta
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only", choices=SECTIONS, action="append", help="run only these sections")
-    parser.add_argument("--out", type=Path, default=Path("docs/bench"), help="output folder (default docs/bench)")
-    parser.add_argument("--repeats", type=int, default=3, help="repeats per timing (median is reported)")
+    parser.add_argument("--out", type=arguments.output_folder, default=Path("docs/bench"), help="output folder (default docs/bench)")
+    parser.add_argument("--repeats", type=arguments.COUNT, default=3, help="repeats per timing (median is reported)")
 
 
 def write_csv(rows: list[dict], path: Path) -> None:

@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from spreadgym.cli import arguments
 
 METHODS = ("published", "random", "grid", "cmaes")
 
@@ -17,20 +18,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--model", type=Path, action="append", metavar="DIR/model.zip",
                         help="policy saved by spreadgym train (repeat the flag to compare several)")
-    parser.add_argument("--budget", type=int, default=DEFAULT_BUDGET, metavar="N",
+    parser.add_argument("--budget", type=arguments.COUNT, default=DEFAULT_BUDGET, metavar="N",
                         help=f"simulations per job for each search (default {DEFAULT_BUDGET})")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS, metavar="METHOD",
                         help=f"baselines to run (default: all of {', '.join(METHODS)})")
-    parser.add_argument("--episodes", type=int, default=1, metavar="N",
+    parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
                         help="scoring episodes per job, each on another granule sample (default 1)")
-    parser.add_argument("--granules", type=int, metavar="N", help="granules per simulation (default: env default, 2000)")
+    parser.add_argument("--granules", type=arguments.GRANULES, metavar="N", help="granules per simulation (default: env default, 2000)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
-    parser.add_argument("--swaths", nargs="+", type=float, metavar="M", help="target swaths (default 2 3 4 5)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the searches (default 0)")
-    parser.add_argument("--workers", type=int, default=1, metavar="N",
+    parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M", help="target swaths (default 2 3 4 5)")
+    parser.add_argument("--seed", type=arguments.SEED, default=0, help="seed of the searches (default 0)")
+    parser.add_argument("--workers", type=arguments.COUNT, default=1, metavar="N",
                         help="processes for the searches (default 1; wall times are per core either way)")
     parser.add_argument("--json", action="store_true", help="print the table and rows as JSON")
-    parser.add_argument("--out", type=Path, default=Path("out/compare"), metavar="DIR",
+    parser.add_argument("--out", type=arguments.output_folder, default=Path("out/compare"), metavar="DIR",
                         help="folder for compare.csv/.md/.json and compare.png (default out/compare)")
 
 
@@ -57,11 +58,11 @@ def baseline_job(env_id: str, env_kwargs: dict, ctx, method: str, budget: int, s
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from spreadgym.agents import evaluation as ev
     from spreadgym.agents.baselines import METHOD_TITLES
     from spreadgym.agents.commands.evaluate import evaluation_env_kwargs
+    from tqdm import tqdm
+
     from spreadgym.errors import SpreadgymError
     from spreadgym.report import print_json
 
@@ -142,6 +143,7 @@ def _load_policies(paths) -> list:
     """(key, SavedPolicy, title) per --model; all SpinnerDesign, all on the same env kwargs."""
     from spreadgym.agents import evaluation as ev
     from spreadgym.agents.training import load_policy
+
     from spreadgym.errors import SpreadgymError
 
     out = []
@@ -172,6 +174,7 @@ def _load_policies(paths) -> list:
 
 def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, elapsed) -> list:
     from spreadgym.agents import evaluation as ev
+
     from spreadgym.report import print_json
 
     out.mkdir(parents=True, exist_ok=True)

@@ -7,19 +7,21 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from spreadgym.cli import arguments
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents import demo
 
-    parser.add_argument("--out", type=Path, default=Path("out/demo"), help="folder for tables and pictures "
+    parser.add_argument("--out", type=arguments.output_folder, default=Path("out/demo"), help="folder for tables and pictures "
                         "(default out/demo)")
-    parser.add_argument("--target-swath", type=float, default=demo.DEFAULT_TARGET_M, metavar="M",
+    parser.add_argument("--target-swath", type=arguments.real(0.0, 100.0, low_open=True), default=demo.DEFAULT_TARGET_M, metavar="M",
                         help=f"target swath in m, on the 0.5 m tray grid (default {demo.DEFAULT_TARGET_M:g})")
-    parser.add_argument("--budget", type=int, default=demo.DEFAULT_BUDGET, metavar="N",
+    parser.add_argument("--budget", type=arguments.COUNT, default=demo.DEFAULT_BUDGET, metavar="N",
                         help=f"CMA-ES simulations on the analytic model (default {demo.DEFAULT_BUDGET})")
-    parser.add_argument("--granules", type=int, default=demo.DEFAULT_GRANULES, metavar="N",
+    parser.add_argument("--granules", type=arguments.GRANULES, default=demo.DEFAULT_GRANULES, metavar="N",
                         help=f"granules per simulation, search and full model (default {demo.DEFAULT_GRANULES})")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the search (default 0)")
+    parser.add_argument("--seed", type=arguments.SEED, default=0, help="seed of the search (default 0)")
     policy = parser.add_mutually_exclusive_group()
     policy.add_argument("--policy", type=Path, metavar="DIR/model.zip",
                         help=f"also show this trained policy (default: {demo.POLICY_PATH} if it exists)")
@@ -33,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from contextlib import redirect_stdout
 
     from spreadgym.agents import demo
+
     from spreadgym.report import print_json
 
     started = time.perf_counter()

@@ -7,7 +7,6 @@ import argparse
 from spreadgym.config.materials import PAIR_QUANTITIES, Fertilizer, load_library
 from spreadgym.report import format_table, print_json
 
-
 _PAIR_TITLES = {
     "friction": "Static friction coefficient (tilting plane, -)",
     "restitution": "Coefficient of restitution (bounce test, -)",

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
+from spreadgym.cli import arguments
 from spreadgym.config.overrides import parse_assignments
 from spreadgym.report import format_table, print_json
 
@@ -18,14 +18,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="override a scene key, VALUE parsed as YAML (e.g. spinner.rpm=800, deflectors=[])")
     parser.add_argument("--model", default="auto", choices=MODELS, help="spinner model (default: auto)")
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
-    parser.add_argument("--plot", type=Path, metavar="DIR", help="write PNG pictures into DIR")
+    parser.add_argument("--plot", type=arguments.output_folder, metavar="DIR", help="write PNG pictures into DIR")
 
 
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from spreadgym.spread.pipeline import run_scene
     from spreadgym.config.scene import load_scene
+    from spreadgym.spread.pipeline import run_scene
 
     scene = load_scene(args.scene, parse_assignments(args.overrides))
     with tqdm(desc="spinner", unit="ms", file=sys.stderr, disable=None, leave=False,

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from spreadgym.cli import arguments
 from spreadgym.report import format_table, print_json
 
 STUDIES = ("paper",)
@@ -31,9 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.physics.selection import MODELS
 
     parser.add_argument("name", choices=STUDIES, help="which study (paper: the seed paper's Figs. 6-9)")
-    parser.add_argument("--granules", type=int, default=200, help="granules per case (default 200)")
+    parser.add_argument("--granules", type=arguments.GRANULES, default=200, help="granules per case (default 200)")
     parser.add_argument("--model", default="pymunk", choices=MODELS, help="spinner model (default: pymunk)")
-    parser.add_argument("--out", type=Path, default=Path("docs/study"),
+    parser.add_argument("--out", type=arguments.output_folder, default=Path("docs/study"),
                         help="folder for the CSV and PNGs (default docs/study)")
     parser.add_argument("--json", action="store_true", help='print {"rows": [...]} as JSON')
 

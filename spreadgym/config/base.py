@@ -74,6 +74,8 @@ def format_validation_error(exc: ValidationError, model: type[BaseModel], root: 
         key = inner if key == root else f"{key}.{inner}"
     if first["type"] == "missing":
         return ConfigError(key, "missing (required)")
+    if first["type"] == "extra_forbidden":
+        return ConfigError(key, "unknown key")
     if first["type"] != "value_error":
         value = first.get("input")
         shown = repr(value) if not isinstance(value, (dict, list)) or len(repr(value)) < 80 else type(value).__name__

@@ -206,11 +206,20 @@ class SpringDashpot:
     damping_ratio: float
 
 
+MAX_GRANULE_MASS_KG = 1e-2  # a 20 mm sphere of 2000 kg/m3 is 8e-3 kg
+CONTACT_TIME_RANGE_S = (1e-7, 0.1)  # measured granule impacts: about 1e-4 s
+
+
 def spring_dashpot(mass_kg: float, restitution: float, contact_time_s: float) -> SpringDashpot:
     """Spring-dashpot reproducing `restitution` and `contact_time_s` (s) for `mass_kg` (kg)."""
     m = check_positive(mass_kg, "mass_kg")
     t = check_positive(contact_time_s, "contact_time_s")
     e = check_restitution(restitution)
+    if m > MAX_GRANULE_MASS_KG:
+        raise CalibrationError("mass_kg", m, f"outside (0, {MAX_GRANULE_MASS_KG:g}] kg: not a fertilizer granule")
+    if not CONTACT_TIME_RANGE_S[0] <= t <= CONTACT_TIME_RANGE_S[1]:
+        lo, hi = CONTACT_TIME_RANGE_S
+        raise CalibrationError("contact_time_s", t, f"outside [{lo:g}, {hi:g}] s: not a granule impact")
     zeta = damping_ratio(e)
     k = math.pi**2 * m / ((1.0 - zeta**2) * t**2)
     return SpringDashpot(

@@ -47,6 +47,7 @@ from spreadgym.errors import ConfigError
 
 DRIVING = ("racetrack", "back-and-forth")
 _GRID_TOL = 1e-9
+MAX_TRAYS = 4001  # a row of trays; 200 m at 0.05 m trays: beyond any spreader, and bounded memory
 
 
 @dataclass(frozen=True)
@@ -156,6 +157,9 @@ def collect(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) ->
     m = int(np.max(np.abs(idx))) if idx.size else 0
     m = max(m, int(np.ceil(half / w - 0.5 - _GRID_TOL)))
     count = 2 * m + 1
+    if count > MAX_TRAYS:
+        raise ConfigError("pattern.tray_width_m", f"the pattern spans {count * w:.0f} m, {count} trays of {w:g} m; "
+                                                  f"allowed up to {MAX_TRAYS} trays (use wider trays)")
     masses = np.bincount(idx + m, weights=mass, minlength=count)
     return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=masses, width_m=w)
 
@@ -205,7 +209,7 @@ def default_widths_m(trays: Trays) -> np.ndarray:
     the pattern, (2 max|i| + 1) w over loaded trays: at least the pattern width and
     at most about twice it. Beyond it neighbouring passes no longer meet."""
     top = 2 * trays.reach_trays + 1
-    return np.arange(1, top + 1) * trays.width_m
+    return np.round(np.arange(1, top + 1) * trays.width_m, 9)  # widths as the grid gives them, not 0.8999...
 
 
 def cv_curve(

@@ -112,8 +112,8 @@ def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
     """
     gone = departure.departed
     if not gone.any():
-        return {"speed_mean_m_s": 0.0, "speed_std_m_s": 0.0, "spin_mean_rad_s": 0.0,
-                "angle_mean_deg": 0.0, "time_on_spinner_mean_s": 0.0}
+        return {"speed_mean_m_s": None, "speed_std_m_s": None, "spin_mean_rad_s": None,
+                "angle_mean_deg": None, "time_on_spinner_mean_s": None}  # nothing to average
     angle = np.degrees(np.arctan2(*departure.radial_tangential_m_s(omega_rad_s)))
     speed = departure.speed_m_s[gone]
     return {
@@ -135,10 +135,16 @@ def _metrics(scene, model, reason, granules, departure, launch, trays, replicate
     interval = list(at_target.interval_percent) if ci and at_target.interval_percent is not None else None
     widths = pattern.default_widths_m(trays) if has_mass else np.zeros(0)
     cvs, _ = estimate.cv_curve(replicate_masses, p.tray_width_m, p.driving, widths)
+    notes = list(launch.notes)
+    if departure.dt_s == 0.0 and scene.sim.dt_s is not None:
+        notes.append(f"sim.dt_s = {scene.sim.dt_s:g} s is ignored: the {model} model has no time step")
+    if has_mass and p.target_swath_m > 2.0 * trays.pattern_width_m:
+        notes.append(f"the target swath {p.target_swath_m:g} m is over twice the pattern's width "
+                     f"({trays.pattern_width_m:g} m): passes do not meet, so the CV there says little")
     return {
         "model": model,
         "model_reason": reason,
-        "dt_s": departure.dt_s,
+        "dt_s": departure.dt_s if departure.dt_s > 0.0 else None,  # None: closed forms, no step
         "granules": granules.count,
         "outcomes": departure.outcome_counts(),
         "departure": departure_summary(departure, scene.spinner.omega_rad_s),
@@ -154,5 +160,5 @@ def _metrics(scene, model, reason, granules, departure, launch, trays, replicate
         "cv_curve": {"bout_width_m": widths, "cv_percent": cvs},
         "trays": {"center_m": trays.center_m, "mass_kg": trays.mass_kg},
         "mass": {"released_kg": released, "landed_kg": landed, "retained_kg": retained},
-        "notes": list(launch.notes),
+        "notes": notes,
     }

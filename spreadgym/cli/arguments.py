@@ -1,0 +1,68 @@
+"""Argument types for every command: numbers in range and output folders that can be
+written, checked when the command line is parsed, before any work starts.
+
+Each raises argparse.ArgumentTypeError, which argparse reports as one line naming the
+flag, with exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+from typing import Callable, Optional
+
+
+def integer(low: int, high: Optional[int] = None) -> Callable[[str], int]:
+    """An int in [low, high] (no upper bound if high is None)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if value < low or (high is not None and value > high):
+            span = f">= {low}" if high is None else f"in [{low}, {high}]"
+            raise argparse.ArgumentTypeError(f"{value} is out of range; allowed: {span}")
+        return value
+    return parse
+
+
+def real(low: float, high: float, low_open: bool = False) -> Callable[[str], float]:
+    """A finite float in [low, high] ((low, high] if low_open)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        below = value <= low if low_open else value < low
+        if not math.isfinite(value) or below or value > high:
+            span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+            raise argparse.ArgumentTypeError(f"{text} is out of range; allowed: {span}")
+        return value
+    return parse
+
+
+def output_folder(text: str) -> Path:
+    """A folder that exists and is writable, or can be created (its first existing
+    ancestor is a writable folder)."""
+    path = Path(text)
+    if path.exists():
+        if not path.is_dir():
+            raise argparse.ArgumentTypeError(f"{text} is a file, not a folder")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise argparse.ArgumentTypeError(f"cannot write in {text}")
+        return path
+    ancestor = path.absolute().parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} lies under {ancestor}, which is a file")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"cannot create {text}: {ancestor} is not writable")
+    return path
+
+
+SEED = integer(0, 2**32 - 1)
+COUNT = integer(1)
+GRANULES = integer(1, 1_000_000)
