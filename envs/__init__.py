@@ -40,6 +40,7 @@ def settings_to_action(env, settings: Mapping[str, Any]) -> np.ndarray:
     left out when there is none). A value outside its range is a ConfigError naming it.
     """
     from spreadgym.envs.actions import Settings
+
     from spreadgym.errors import ConfigError
 
     smap = _settings_map(env)
@@ -73,7 +74,6 @@ def register_rllib() -> None:
     Needs `ray[rllib]` (the `rllib` extra).
     """
     from ray.tune.registry import register_env
-
     from spreadgym.envs.registration import ENVS
 
     for name in ENVS:

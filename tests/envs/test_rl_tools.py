@@ -10,12 +10,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import yaml
-
-import spreadgym  # noqa: F401  (registers the envs)
 from spreadgym.envs import action_to_settings, setting_ranges, settings_to_action
 from spreadgym.envs.config import DESIGN, TUNING, load_env_config
 from spreadgym.envs.vector import SpinnerDesignVectorEnv
 from spreadgym.envs.zoo import hyperparams_path
+
+import spreadgym  # noqa: F401  (registers the envs)
 from spreadgym.errors import ConfigError
 
 SMALL = {"granules": 32}
@@ -42,7 +42,8 @@ def test_namespaced_id_needs_the_import_in_a_fresh_process():
     unknown in a process that has not imported spreadgym, and known once it has."""
     bare = run_python(["-c", "import gymnasium as gym; gym.make('spreadgym/SpinnerDesign-v0')"])
     assert bare.returncode != 0 and "NamespaceNotFound" in bare.stderr
-    imported = run_python(["-c", "import gymnasium as gym, spreadgym; gym.make('spreadgym/SpinnerDesign-v0', granules=32)"])
+    code = "import gymnasium as gym, spreadgym; gym.make('spreadgym/SpinnerDesign-v0', granules=32)"
+    imported = run_python(["-c", code])
     assert imported.returncode == 0, imported.stderr
 
 
@@ -181,8 +182,9 @@ def test_settings_round_trip_through_the_action(name):
 def test_settings_to_action_names_a_bad_value():
     env = gym.make("spreadgym/SpinnerDesign-v0", **SMALL)
     lo, hi = setting_ranges(env)["rpm"]
+    angles = [0.0] * (len(setting_ranges(env)) - 2)
     with pytest.raises(ConfigError, match=r"settings\.rpm.*outside"):
-        settings_to_action(env, {"rpm": hi + 1, "pitch_deg": 0.0, "deflector_angle_deg": [0.0] * (len(setting_ranges(env)) - 2)})
+        settings_to_action(env, {"rpm": hi + 1, "pitch_deg": 0.0, "deflector_angle_deg": angles})
     with pytest.raises(ConfigError, match="settings.speed"):
         settings_to_action(env, {"rpm": lo, "pitch_deg": 0.0, "speed": 1})
 
