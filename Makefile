@@ -4,6 +4,10 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
+# Second venv with the optional RL tools (rl_zoo3, sb3-contrib, ray[rllib]); ray pins
+# gymnasium 1.2.2, so tests/envs runs there on the low end of the gymnasium range.
+RLVENV := .venv-rl
+RLSTAMP := $(RLVENV)/.installed-stamp
 
 .PHONY: demo test bench venv clean
 
@@ -12,16 +16,22 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/python -m pip install --quiet --constraint constraints.txt --editable ".[dev]"
 	touch $(STAMP)
 
+$(RLSTAMP): pyproject.toml constraints.txt
+	test -x $(RLVENV)/bin/python || $(PYTHON) -m venv $(RLVENV)
+	$(RLVENV)/bin/python -m pip install --quiet --constraint constraints.txt --editable ".[dev,zoo,rllib]"
+	touch $(RLSTAMP)
+
 venv: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/spreadgym demo
 
-test: $(STAMP)
+test: $(STAMP) $(RLSTAMP)
 	$(BIN)/python -m pytest -q
+	$(RLVENV)/bin/python -m pytest -q tests/envs
 
 bench: $(STAMP)
 	$(BIN)/spreadgym bench
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) $(RLVENV) build *.egg-info

@@ -1,1 +1,89 @@
-"""Gymnasium layer of spreadgym (installed as spreadgym.envs)."""
+"""Gymnasium layer of spreadgym (installed as spreadgym.envs).
+
+Public helpers for tools outside gymnasium's own API (docs/rl-tools.md):
+
+* `setting_ranges(env)`, `settings_to_action(env, settings)`, `action_to_settings(env, action)`:
+  physical settings (rpm, degrees) <-> the unit vector in [-1, 1] of the action
+  (SpinnerDesign) or of the observation's `setting:*` entries (SpreaderTuning);
+* `register_rllib()`: makes the `spreadgym/...` ids resolvable in RLlib's env runners.
+
+This module imports only on call, so `import spreadgym` stays light.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, Mapping
+
+import numpy as np
+
+
+def _settings_map(env):
+    """The SettingsMap of a (wrapped or vector) spreadgym env."""
+    task = getattr(env.unwrapped, "task", None)
+    if task is None:
+        raise TypeError(f"{env!r} is not a spreadgym env (it has no task)")
+    return task.settings_map
+
+
+def setting_ranges(env) -> dict[str, tuple[float, float]]:
+    """Each setting's name and range in action order: rpm, pitch_deg (or pitch_deg[k]), deflectors[i].angle_deg."""
+    smap = _settings_map(env)
+    return {name: (float(lo), float(hi)) for name, lo, hi in zip(smap.names, smap.low, smap.high)}
+
+
+def settings_to_action(env, settings: Mapping[str, Any]) -> np.ndarray:
+    """The unit vector (float32) of physical settings given as in `info["settings"]`.
+
+    `settings` holds `rpm`, `pitch_deg` (a number, or one per vane when the env has
+    `pitch_per_vane`) and `deflector_angle_deg` (one per adjustable deflector; may be
+    left out when there is none). A value outside its range is a ConfigError naming it.
+    """
+    from spreadgym.envs.actions import Settings
+
+    from spreadgym.errors import ConfigError
+
+    smap = _settings_map(env)
+    unknown = set(settings) - {"rpm", "pitch_deg", "deflector_angle_deg"}
+    if unknown:
+        raise ConfigError(f"settings.{sorted(unknown)[0]}", "unknown key; known: rpm, pitch_deg, deflector_angle_deg")
+    if "rpm" not in settings or "pitch_deg" not in settings:
+        raise ConfigError("settings", "rpm and pitch_deg are required")
+    pitch = np.atleast_1d(np.asarray(settings["pitch_deg"], dtype=np.float64))
+    angles = np.atleast_1d(np.asarray(settings.get("deflector_angle_deg", []), dtype=np.float64))
+    values = np.concatenate([[float(settings["rpm"])], pitch, angles])
+    if values.size != smap.size:
+        raise ConfigError("settings", f"expected {smap.size} values ({', '.join(smap.names)}), got {values.size}")
+    for name, value, lo, hi in zip(smap.names, values, smap.low, smap.high):
+        if not lo <= value <= hi:
+            raise ConfigError(f"settings.{name}", f"{value:g} is outside its range [{lo:g}, {hi:g}]")
+    unit = smap.to_unit(Settings(float(values[0]), tuple(pitch), tuple(angles)))
+    return unit.astype(np.float32)
+
+
+def action_to_settings(env, action) -> dict:
+    """Physical settings of a unit vector (clipped to [-1, 1]), laid out as `info["settings"]`."""
+    return _settings_map(env).to_settings(np.asarray(action, dtype=np.float64)).as_dict()
+
+
+def register_rllib() -> None:
+    """Register the `spreadgym/...` and `spreadgym:...` ids with Ray Tune's env registry.
+
+    RLlib's env runners are fresh processes; env ids registered this way reach them
+    as creators that import spreadgym first. `env_config` becomes `gym.make` kwargs.
+    Needs `ray[rllib]` (the `rllib` extra).
+    """
+    from ray.tune.registry import register_env
+    from spreadgym.envs.registration import ENVS
+
+    for name in ENVS:
+        for env_id in (f"spreadgym/{name}", f"spreadgym:{name}"):
+            register_env(env_id, functools.partial(_rllib_env, env_id))
+
+
+def _rllib_env(env_id: str, env_config: Mapping[str, Any]):
+    import gymnasium
+
+    import spreadgym  # noqa: F401  (registers the envs in this worker)
+
+    return gymnasium.make(env_id, **dict(env_config))

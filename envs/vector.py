@@ -1,0 +1,122 @@
+"""`spreadgym/SpinnerDesign-v0` as a gymnasium `VectorEnv` (its registered `vector_entry_point`).
+
+`gym.make_vec("spreadgym/SpinnerDesign-v0", num_envs=N, **kwargs)` builds this class: one
+`Task` (library, base scene, checks) shared by N sub-envs instead of N copies, a batch
+of actions in and stacked observations, rewards and infos out.
+
+Same results as the single env: sub-env i is a `SpinnerDesignEnv` sharing the task,
+so with `reset(seed=s)` (sub-env i seeded s + i, as gymnasium's vector envs do) every
+observation, reward and info equals, bit for bit, that of `gym.make(id).reset(seed=s + i)`
+followed by the same actions, with a plain `reset()` after each episode.
+
+Speed: each sub-env's tray test is still one `run_scene` call. The core simulates one
+scene (one rpm, pitch and set of deflector angles) per call, so a batch of designs
+costs the sum of its scenes; docs/rl-tools.md has the measured rates against
+`SyncVectorEnv`.
+
+Autoreset: `autoreset_mode="next_step"` (gymnasium's default: the step after an
+episode's end resets that sub-env and ignores its action) or `"same_step"` (the
+sub-env is reset in the step that ends the episode; its last observation and info are
+in `info["final_obs"]` and `info["final_info"]`). SpinnerDesign ends every episode
+after one step, so "same_step" wastes no calls on resets.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any, Optional
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from spreadgym.envs.spinner_design import SpinnerDesignEnv
+
+from spreadgym.errors import ConfigError
+
+MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+
+
+class SpinnerDesignVectorEnv(VectorEnv):
+    """`num_envs` SpinnerDesign sub-envs sharing one task; keyword arguments as `gym.make`."""
+
+    def __init__(self, num_envs: int = 1, autoreset_mode: str | AutoresetMode = "next_step",
+                 render_mode: Optional[str] = None, **kwargs: Any):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ConfigError("num_envs", f"expected an integer >= 1, got {num_envs!r}")
+        mode = autoreset_mode.name.lower() if isinstance(autoreset_mode, AutoresetMode) else autoreset_mode
+        if mode not in MODES:
+            raise ConfigError("autoreset_mode", f"unknown {autoreset_mode!r}; allowed: {sorted(MODES)}")
+        if render_mode is not None:
+            raise ConfigError("render_mode", "the vector env does not render; render a single env instead")
+        first = SpinnerDesignEnv(**kwargs)
+        self.envs = [first] + [_sharing_task(first) for _ in range(int(num_envs) - 1)]
+        self.num_envs = int(num_envs)
+        self.metadata = {"autoreset_mode": MODES[mode]}
+        self.render_mode = None
+        self.single_action_space = first.action_space
+        self.single_observation_space = first.observation_space
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+
+    @property
+    def task(self):
+        """The task all sub-envs share (its `settings_map` maps actions to settings)."""
+        return self.envs[0].task
+
+    def reset(self, *, seed: int | list[int | None] | None = None, options: Optional[dict] = None):
+        """Reset every sub-env; an int seed s seeds sub-env i with s + i."""
+        super().reset(seed=seed)
+        if seed is None:
+            seeds = [None] * self.num_envs
+        elif isinstance(seed, (int, np.integer)):
+            seeds = [int(seed) + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"reset got {len(seeds)} seeds for num_envs={self.num_envs}")
+        observations, infos = [], {}
+        for i, (env, env_seed) in enumerate(zip(self.envs, seeds)):
+            obs, info = env.reset(seed=env_seed, options=options)
+            observations.append(obs)
+            infos = self._add_info(infos, info, i)
+        self._autoreset[:] = False
+        return np.stack(observations), infos
+
+    def step(self, actions):
+        actions = np.asarray(actions)
+        if actions.shape[:1] != (self.num_envs,):
+            raise ValueError(f"actions must have {self.num_envs} rows (one per sub-env), got shape {actions.shape}")
+        same_step = self.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+        observations = []
+        rewards = np.zeros(self.num_envs, dtype=np.float64)
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        truncated = np.zeros(self.num_envs, dtype=bool)
+        infos: dict = {}
+        for i, env in enumerate(self.envs):
+            if self._autoreset[i]:  # next_step mode only
+                obs, info = env.reset()
+            else:
+                obs, rewards[i], terminated[i], truncated[i], info = env.step(actions[i])
+                if same_step and (terminated[i] or truncated[i]):
+                    infos = self._add_info(infos, {"final_obs": obs, "final_info": info}, i)
+                    obs, info = env.reset()
+            observations.append(obs)
+            infos = self._add_info(infos, info, i)
+        if not same_step:
+            self._autoreset = terminated | truncated
+        return np.stack(observations), rewards, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any):
+        for env in getattr(self, "envs", []):  # also for an instance whose __init__ raised
+            env.close()
+
+
+def _sharing_task(env: SpinnerDesignEnv) -> SpinnerDesignEnv:
+    """A sub-env with `env`'s (read-only) task and config and a state of its own."""
+    other = copy.copy(env)
+    other._np_random = None
+    other._np_random_seed = None
+    other._context = other._scene = other._last = other._viewer = None
+    other._context_info = {}
+    return other
