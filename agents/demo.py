@@ -99,12 +99,12 @@ def _full_run(scene, label: str):
 def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAULT_BUDGET,
              granules: int = DEFAULT_GRANULES, seed: int = 0, policy_path: Optional[Path] = POLICY_PATH,
              policy_required: bool = False) -> dict:
-    from tqdm import tqdm
-
     from spreadgym.agents.baselines import cmaes_search
     from spreadgym.agents.evaluation import DESIGN_ENV, EvalContext, make_env, published_action
-    from spreadgym.errors import SpreadgymError
+    from tqdm import tqdm
+
     from spreadgym.config.scene import load_scene, scene_with
+    from spreadgym.errors import SpreadgymError
 
     started = time.perf_counter()
     if budget < 1:
@@ -189,8 +189,9 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
 def _policy_column(path: Path, ctx, base, granules: int, steps: int, required: bool) -> Optional[Column]:
     from spreadgym.agents.evaluation import make_env
     from spreadgym.agents.training import load_policy
-    from spreadgym.errors import SpreadgymError
+
     from spreadgym.config.scene import scene_with
+    from spreadgym.errors import SpreadgymError
 
     try:
         policy = load_policy(path)
@@ -250,8 +251,9 @@ def table_rows(columns: list[Column], target_m: float) -> list[tuple]:
 
 def write_demo(out: Path, columns: list[Column], target_m: float, budget: int, granules: int, wall: float) -> list:
     from spreadgym.agents.evaluation import write_csv
-    from spreadgym.viz.plots import write_simulation_plots
+
     from spreadgym.report import format_table, print_json
+    from spreadgym.viz.plots import write_simulation_plots
 
     out.mkdir(parents=True, exist_ok=True)
     header = ("quantity", *[c.title for c in columns])

@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from gymnasium import spaces
-
 from spreadgym.envs.config import SettingsConfig
-from spreadgym.errors import ConfigError
+
 from spreadgym.config.scene import Scene
+from spreadgym.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -44,13 +44,14 @@ class Settings:
 
 
 def check_action(action, size: int) -> np.ndarray:
-    """The action as float64 of shape (size,), clipped to [-1, 1]; non-finite is refused."""
-    a = np.asarray(action, dtype=np.float64)
+    """The action as float64 of shape (size,), clipped to [-1, 1]; anything else is refused
+    (ValueError naming what was given): other shapes, non-numbers, non-finite entries."""
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"action must be {size} finite numbers, got {action!r}") from None
     if a.shape != (size,):
-        if a.size == size and a.ndim <= 2:
-            a = a.reshape(size)
-        else:
-            raise ValueError(f"action must have shape ({size},), got {a.shape}")
+        raise ValueError(f"action must have shape ({size},), got {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ValueError(
             f"action is not finite: {a.tolist()}; every entry must be a finite number "

@@ -26,8 +26,8 @@ from typing import Any, Literal, Mapping, Optional
 from pydantic import BaseModel, Field, ValidationError, field_validator
 
 from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error
-from spreadgym.errors import ConfigError
 from spreadgym.config.resources import read_yaml, resolve_named
+from spreadgym.errors import ConfigError
 
 DESIGN = "spinner_design"
 TUNING = "spreader_tuning"

@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from spreadgym.physics.geometry import vane_segments
 from spreadgym.config.scene import Scene
+from spreadgym.physics.geometry import vane_segments
 
 
 def draw_frame(

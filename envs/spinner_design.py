@@ -27,17 +27,17 @@ from typing import Any, Optional
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-
-from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.envs import reward as rewards
 from spreadgym.envs.actions import Settings, SettingsMap, check_action
 from spreadgym.envs.config import DESIGN, DesignConfig, load_env_config
 from spreadgym.envs.render import HumanViewer, draw_frame
-from spreadgym.errors import ConfigError, MaterialError
+
 from spreadgym.config.materials import load_library
+from spreadgym.config.scene import Scene, load_scene, scene_with
+from spreadgym.errors import ConfigError, MaterialError
+from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.selection import choose_model
 from spreadgym.spread.pipeline import SimulationResult, run_scene
-from spreadgym.config.scene import Scene, load_scene, scene_with
 
 SEED_BOUND = 2**31 - 1
 
@@ -234,6 +234,18 @@ class Task:
                          tracks=tracks)
 
 
+RESET_OPTIONS = ("context",)
+
+
+def check_reset_options(options: Any) -> None:
+    """Reset options are a mapping of known keys; anything else is a ConfigError naming it."""
+    if not isinstance(options, dict):
+        raise ConfigError("options", f"expected a mapping, got {type(options).__name__}")
+    for key in options:
+        if key not in RESET_OPTIONS:
+            raise ConfigError(f"options.{key}", f"unknown reset option; known: {', '.join(RESET_OPTIONS)}")
+
+
 def info_metrics(metrics: dict) -> dict:
     """`simulate --json` metrics as plain Python data, without the wall-clock time.
 
@@ -295,8 +307,10 @@ class SpinnerDesignEnv(gym.Env):
         super().reset(seed=seed)
         context = self.task.sample_context(self.np_random)
         self._sim_seed = int(self.np_random.integers(SEED_BOUND))
-        if options and "context" in options:
-            context = self.task.replace_context(context, options["context"])
+        if options:
+            check_reset_options(options)
+            if "context" in options:
+                context = self.task.replace_context(context, options["context"])
         self._context = context
         self._scene = self.task.context_scene(context)
         self._context_info = self.task.context_info(context)

@@ -30,15 +30,15 @@ from typing import Any, Optional
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-
-from spreadgym.spread import pattern
 from spreadgym.envs import reward as rewards
 from spreadgym.envs.actions import check_action
 from spreadgym.envs.config import TUNING, load_env_config
 from spreadgym.envs.render import HumanViewer, draw_frame
-from spreadgym.envs.spinner_design import SEED_BOUND, Context, Task, frame_lines, info_metrics
-from spreadgym.errors import ConfigError
+from spreadgym.envs.spinner_design import SEED_BOUND, Context, Task, check_reset_options, frame_lines, info_metrics
+
 from spreadgym.config.scene import Scene
+from spreadgym.errors import ConfigError
+from spreadgym.spread import pattern
 
 SUMMARY_NAMES = ["cv", "swath", "landed", "steps_left"]
 
@@ -100,6 +100,7 @@ class SpreaderTuningEnv(gym.Env):
         self.observation_space = spaces.Box(-1.0, 1.0, shape=(len(self.observation_names),), dtype=np.float32)
         self.reward_bounds = rewards.tuning_reward_bounds(self.config.reward)
         self._context: Optional[Context] = None
+        self._ended = False
         self._scene: Optional[Scene] = None
         self._context_info: dict = {}
         self._context_obs = np.zeros(self.task.context_size, dtype=np.float32)
@@ -113,9 +114,12 @@ class SpreaderTuningEnv(gym.Env):
         super().reset(seed=seed)
         smap = self.task.settings_map
         context = self.task.sample_context(self.np_random)
-        if options and "context" in options:
-            context = self.task.replace_context(context, options["context"])
+        if options:
+            check_reset_options(options)
+            if "context" in options:
+                context = self.task.replace_context(context, options["context"])
         self._context = context
+        self._ended = False
         self._scene = self.task.context_scene(context)
         self._context_info = self.task.context_info(context)
         self._context_obs = self.task.encode_context(context, self._scene)
@@ -137,6 +141,8 @@ class SpreaderTuningEnv(gym.Env):
     def step(self, action):
         if self._context is None:
             raise gym.error.ResetNeeded("call reset() before step()")
+        if self._ended:
+            raise gym.error.ResetNeeded("the episode has ended (terminated or truncated); call reset()")
         smap = self.task.settings_map
         a = check_action(action, smap.size)
         self._unit = np.clip(self._unit + self.config.max_change * a, -1.0, 1.0)
@@ -145,6 +151,7 @@ class SpreaderTuningEnv(gym.Env):
         cv = result.metrics.get("cv_percent_at_target")
         terminated = bool(cv is not None and cv <= self.config.goal_cv_percent)
         truncated = bool(not terminated and self._steps >= self.config.max_steps)
+        self._ended = terminated or truncated
         reward = rewards.tuning_reward(score, self.config.reward, terminated)
         self._last = (result.scene, result, settings, score, reward)
         info = self._info(result, settings, score)

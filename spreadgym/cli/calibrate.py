@@ -13,14 +13,14 @@ import argparse
 import sys
 import warnings
 
-from spreadgym.physics import calibration as cal
-from spreadgym.errors import SpreadgymError
 from spreadgym.config.materials import load_library
+from spreadgym.errors import SpreadgymError
+from spreadgym.physics import calibration as cal
 from spreadgym.report import format_table, print_json
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--mass", type=float, metavar="KG", help="granule mass, kg")
+    parser.add_argument("--mass", type=float, metavar="KG", help=f"granule mass, kg, in (0, {MAX_GRANULE_MASS_KG:g}]")
     parser.add_argument("--restitution", type=float, metavar="E", help="restitution, in (0, 1]")
     parser.add_argument("--contact-time", type=float, metavar="S", help="contact time, s")
     parser.add_argument("--fertilizer", metavar="NAME", help="library fertilizer (pair mode)")
@@ -31,6 +31,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="check the paper's printed Table 3 stiffness/damping for consistency",
     )
     parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
+
+
+MAX_GRANULE_MASS_KG = 1e-2  # a 20 mm sphere of 2000 kg/m3 is 8e-3 kg
+
+
+def granule_mass(value) -> float:
+    """--mass checked: positive and no heavier than a fertilizer granule can be."""
+    mass = cal.check_positive(value, "--mass")
+    if mass > MAX_GRANULE_MASS_KG:
+        raise cal.CalibrationError("--mass", mass, f"outside (0, {MAX_GRANULE_MASS_KG:g}] kg: not a fertilizer granule")
+    return mass
 
 
 def _given(args: argparse.Namespace, *names: str) -> list[str]:
@@ -137,7 +148,7 @@ def _pair(args: argparse.Namespace) -> int:
     if args.mass is None:
         mass = cal.sphere_mass(fert.size.d50_m, fert.particle_density_kg_m3)
     else:
-        mass = cal.check_positive(args.mass, "--mass")
+        mass = granule_mass(args.mass)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", cal.PaperTableWarning)
         result = cal.default_contact(args.fertilizer, args.surface, mass, library)
@@ -184,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
             f"missing {', '.join(missing)}: give --mass, --restitution and --contact-time, "
             "or --fertilizer and --surface, or --paper-table"
         )
-    mass = cal.check_positive(args.mass, "--mass")
+    mass = granule_mass(args.mass)
     e = cal.check_restitution(args.restitution, "--restitution")
     t = cal.check_positive(args.contact_time, "--contact-time")
     payload = _contact_payload(mass, cal.spring_dashpot(mass, e, t))

@@ -47,7 +47,10 @@ def build_parser(argv: Sequence[str] = ()) -> tuple[argparse.ArgumentParser, Opt
 def main(argv: Optional[list[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser, module = build_parser(argv)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as ended:  # a usage error (already printed, one line) or --help
+        return int(ended.code or 0)
     try:
         code = int(module.run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows up here, not at interpreter exit

@@ -55,19 +55,23 @@ def read_yaml(path: Path) -> Any:
 
 
 def resolve_named(kind: str, name_or_path: str) -> Path:
-    """Find configs/<kind>/<name>.yaml, or accept a path to a YAML file."""
+    """Find configs/<kind>/<name>.yaml, or accept a path to a YAML file.
+
+    A shipped name wins over a folder of the same name in the working directory."""
     candidate = Path(name_or_path)
-    if candidate.suffix in (".yaml", ".yml") or candidate.exists():
+    shipped = config_dir() / kind / f"{name_or_path}.yaml"
+    if candidate.suffix in (".yaml", ".yml") or candidate.is_file():
         if candidate.is_dir():
             raise ConfigError(kind, f"{name_or_path!r} is a folder; give a YAML file or a shipped name")
         if not candidate.is_file():
             raise ConfigError(kind, f"no such file {name_or_path!r}")
         return candidate
-    shipped = config_dir() / kind / f"{name_or_path}.yaml"
-    if not shipped.is_file():
-        names = ", ".join(available(kind))
-        raise ConfigError(kind, f"unknown name {name_or_path!r}; available: {names}")
-    return shipped
+    if shipped.is_file():
+        return shipped
+    if candidate.is_dir():
+        raise ConfigError(kind, f"{name_or_path!r} is a folder; give a YAML file or a shipped name")
+    names = ", ".join(available(kind))
+    raise ConfigError(kind, f"unknown name {name_or_path!r}; available: {names}")
 
 
 def available(kind: str) -> list[str]:

@@ -19,6 +19,7 @@ from spreadgym.errors import ConfigError
 
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 MAX_RPM = 5000.0
+MIN_RPM = 10.0  # slower discs throw nothing; the closed forms overflow as rpm -> 0
 MAX_PITCH_DEG = 60.0
 MAX_TIP_SPEED_M_S = 100.0  # disc rim speed; spreaders run 15-45 m/s, beyond 100 throws leave any field
 MAX_WIND_M_S = 20.0  # each component; nobody spreads in a gale, and the flight stays bounded
@@ -31,7 +32,7 @@ Angle = Annotated[Real, Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG)]
 
 class Spinner(StrictModel):
     radius_m: Real = Field(gt=0, le=2.0, description="disc radius")
-    rpm: Real = Field(gt=0, le=MAX_RPM, description="disc speed, revolutions per minute")
+    rpm: Real = Field(ge=MIN_RPM, le=MAX_RPM, description="disc speed, revolutions per minute")
     height_m: Real = Field(ge=0, le=5.0, description="disc height above ground")
     direction: Literal["ccw", "cw"] = Field(description="sense of rotation seen from above")
     material: str

@@ -23,8 +23,8 @@ import warnings
 from dataclasses import asdict, dataclass
 from typing import Any, Optional
 
-from spreadgym.errors import SpreadgymError
 from spreadgym.config.materials import MaterialLibrary, load_library
+from spreadgym.errors import SpreadgymError
 
 # Rule deciding whether a printed Table 3 row is consistent (see docs/calibration.md).
 MEDIAN_MASS_FACTOR = 3.0
@@ -206,7 +206,6 @@ class SpringDashpot:
     damping_ratio: float
 
 
-MAX_GRANULE_MASS_KG = 1e-2  # a 20 mm sphere of 2000 kg/m3 is 8e-3 kg
 CONTACT_TIME_RANGE_S = (1e-7, 0.1)  # measured granule impacts: about 1e-4 s
 
 
@@ -215,8 +214,6 @@ def spring_dashpot(mass_kg: float, restitution: float, contact_time_s: float) ->
     m = check_positive(mass_kg, "mass_kg")
     t = check_positive(contact_time_s, "contact_time_s")
     e = check_restitution(restitution)
-    if m > MAX_GRANULE_MASS_KG:
-        raise CalibrationError("mass_kg", m, f"outside (0, {MAX_GRANULE_MASS_KG:g}] kg: not a fertilizer granule")
     if not CONTACT_TIME_RANGE_S[0] <= t <= CONTACT_TIME_RANGE_S[1]:
         lo, hi = CONTACT_TIME_RANGE_S
         raise CalibrationError("contact_time_s", t, f"outside [{lo:g}, {hi:g}] s: not a granule impact")

@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Optional
 
-from spreadgym.errors import MaterialError
 from spreadgym.config.materials import Fertilizer, MaterialLibrary
 from spreadgym.config.scene import Scene
+from spreadgym.errors import MaterialError
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from spreadgym.errors import ConfigError
 from spreadgym.config.scene import Scene
+from spreadgym.errors import ConfigError
 
 TUNNEL_SAFETY = 0.5
 OMEGA_DT_MAX = 0.005

@@ -13,8 +13,8 @@ departure speed, so it is used only when asked for.
 
 from __future__ import annotations
 
-from spreadgym.errors import ConfigError
 from spreadgym.config.scene import Scene
+from spreadgym.errors import ConfigError
 
 MODELS = ("auto", "analytic", "pymunk", "spring-damper")
 

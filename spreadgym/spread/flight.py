@@ -30,8 +30,8 @@ from typing import Optional
 
 import numpy as np
 
-from spreadgym.errors import ConfigError
 from spreadgym.config.scene import Flight
+from spreadgym.errors import ConfigError
 
 # Local error tolerance of the adaptive method, per step and per granule: absolute
 # (m on positions, m/s on velocities) plus relative. Chosen so the landing point

@@ -12,20 +12,19 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from spreadgym.spread import flight as flight_model
-from spreadgym.spread import estimate, pattern
-from spreadgym.physics.contacts import Contacts, resolve_contacts
-from spreadgym.physics.granules import GranuleBatch, sample_granules
 from spreadgym.config.materials import MaterialLibrary, load_library
-from spreadgym.physics.analytic.spinner import simulate_analytic
+from spreadgym.config.scene import Scene
 from spreadgym.physics.analytic.deflector_rays import deflect
+from spreadgym.physics.analytic.spinner import simulate_analytic
+from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.departure import Departure
+from spreadgym.physics.granules import GranuleBatch, sample_granules
+from spreadgym.physics.selection import choose_model
 from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk
 from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
-from spreadgym.physics.selection import choose_model
 from spreadgym.physics.stepped.spring_damper import simulate_spring_damper
-from spreadgym.config.scene import Scene
-
+from spreadgym.spread import estimate, pattern
+from spreadgym.spread import flight as flight_model
 
 
 @dataclass

@@ -19,8 +19,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, FancyArrowPatch
 
-from spreadgym.spread import pattern
 from spreadgym.physics.geometry import vane_segments, zone_radius_m
+from spreadgym.spread import pattern
 
 FIGSIZE_IN = (7.0, 5.0)
 DPI = 100

@@ -28,7 +28,7 @@ from spreadgym.errors import ConfigError
         ("feed.spread_m=1e9", "feed.spread_m", "<= 2"),
         ("feed.spread_m=0.5", "feed.spread_m", "wider than the disc radius"),
         ("spinner.rpm=true", "spinner.rpm", "valid number (got True)"),
-        ("spinner.rpm=.nan", "spinner.rpm", "allowed: > 0, <= 5000"),
+        ("spinner.rpm=.nan", "spinner.rpm", "allowed: >= 10, <= 5000"),
         ('sim.granules="200"', "sim.granules", "valid integer"),
         ("sim.granules=200.0", "sim.granules", "valid integer"),
     ],
@@ -74,3 +74,12 @@ def test_a_missing_section_is_named_without_printing_the_scene(tmp_path):
     with pytest.raises(ConfigError) as err:
         load_scene(str(raw))
     assert str(err.value) == "pattern: missing (required)"
+
+
+def test_a_shipped_name_wins_over_a_folder_of_that_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "paper").mkdir()  # e.g. left by `simulate --plot paper`
+    assert load_scene("paper").spinner.radius_m == 0.15  # the shipped scene, not the folder
+    (tmp_path / "mine").mkdir()
+    with pytest.raises(ConfigError, match="'mine' is a folder"):
+        load_scene("mine")

@@ -7,8 +7,8 @@ import json
 import pytest
 
 from spreadgym.cli.main import main
-from spreadgym.errors import MaterialError
 from spreadgym.config.materials import PAIR_QUANTITIES, load_library
+from spreadgym.errors import MaterialError
 
 FERTILIZER_KEYS = {
     "particle_density_kg_m3",

@@ -29,10 +29,10 @@ from typing import Sequence, Union
 
 import numpy as np
 
+from spreadgym.config.scene import Deflector
 from spreadgym.physics.contacts import Contacts, PlateContact
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.geometry import zone_radius_m
-from spreadgym.config.scene import Deflector
 
 GRAVITY_M_S2 = 9.81
 KAPPA_SPHERE = 0.4

@@ -48,11 +48,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spreadgym.physics.contacts import Contacts
-from spreadgym.physics.granules import GranuleBatch, rotate
-from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
-from spreadgym.physics.analytic.vane_slide import KAPPA_SPHERE, REBOUND_STOP, run_along_vane, solve_increasing
 from spreadgym.config.scene import Scene
+from spreadgym.physics.analytic.vane_slide import KAPPA_SPHERE, REBOUND_STOP, run_along_vane, solve_increasing
+from spreadgym.physics.contacts import Contacts
+from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
+from spreadgym.physics.granules import GranuleBatch, rotate
 
 GRAVITY_M_S2 = 9.81
 DRIFT_CAP = 0.5  # first-order disc drag: drift speed capped at this fraction of the disc speed

@@ -17,11 +17,11 @@ import numpy as np
 import pymunk
 import pymunk.batch as batch
 
+from spreadgym.config.scene import Deflector
 from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.geometry import ZONE_MARGIN_M, advance_to_circle, crossing_fraction, zone_radius_m
 from spreadgym.physics.vertical import GRAVITY_M_S2
-from spreadgym.config.scene import Deflector
 
 GRANULES_PER_SPACE = 100
 TUNNEL_SAFETY = 0.5

@@ -24,14 +24,14 @@ import numpy as np
 import pymunk
 import pymunk.batch as batch
 
+from spreadgym.config.scene import Scene
 from spreadgym.physics.contacts import Contacts
-from spreadgym.physics.granules import GranuleBatch, rotate
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
 from spreadgym.physics.disc_friction import disc_surface_velocity, friction_velocity_change
 from spreadgym.physics.geometry import crossing_fraction, machine_frame_tracks, vane_segments
+from spreadgym.physics.granules import GranuleBatch, rotate
 from spreadgym.physics.numerics import choose_time_step, collision_bias_for
 from spreadgym.physics.vertical import GRAVITY_M_S2, VerticalState, free_fall_to
-from spreadgym.config.scene import Scene
 
 GRANULES_PER_SPACE = 200
 SOLVER_ITERATIONS = 10

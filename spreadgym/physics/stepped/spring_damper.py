@@ -60,16 +60,16 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from spreadgym.config.scene import Scene
+from spreadgym.errors import ConfigError, MaterialError
 from spreadgym.physics.calibration import damping_ratio, spring_dashpot
 from spreadgym.physics.contacts import Contacts
-from spreadgym.errors import ConfigError, MaterialError
-from spreadgym.physics.granules import GranuleBatch, rotate
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
 from spreadgym.physics.disc_friction import disc_surface_velocity, friction_velocity_change
 from spreadgym.physics.geometry import crossing_fraction, machine_frame_tracks, vane_segments
+from spreadgym.physics.granules import GranuleBatch, rotate
 from spreadgym.physics.numerics import OMEGA_DT_MAX, TUNNEL_SAFETY, tunnelling_limit_s
 from spreadgym.physics.vertical import GRAVITY_M_S2, VerticalState, free_fall_to
-from spreadgym.config.scene import Scene
 
 CONTACT_STEPS = 50  # default step: t_c / CONTACT_STEPS (see the module docstring)
 CRITICAL_SAFETY = 0.5  # default step at most this fraction of the explicit stability limit

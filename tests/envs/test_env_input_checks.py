@@ -1,0 +1,67 @@
+"""Regression tests of issue 15's environment findings: options, kwargs and actions go
+through the same checks as scenes, and the gymnasium contracts hold."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import spreadgym.envs  # noqa: F401  (registers the ids)
+
+from spreadgym.errors import ConfigError
+
+IDS = ("spreadgym/SpinnerDesign-v0", "spreadgym/SpreaderTuning-v0")
+
+
+@pytest.fixture(scope="module", params=IDS)
+def env(request):
+    made = gym.make(request.param, granules=256, disable_env_checker=True)
+    yield made
+    made.close()
+
+
+@pytest.mark.parametrize("options, key", [
+    ({"context": {"wind_m_s": [float("nan"), 0.0]}}, "flight.wind_m_s.0"),
+    ({"context": {"wind_m_s": [1e6, 0.0]}}, "flight.wind_m_s.0"),
+    ({"foo": 1}, "options.foo"),
+])
+def test_reset_options_are_checked(env, options, key):
+    with pytest.raises(ConfigError) as err:
+        env.reset(seed=0, options=options)
+    assert err.value.key == key
+
+
+@pytest.mark.parametrize("action, fragment", [
+    ("abc", "finite numbers"),
+    (np.zeros((1, 2)), "shape (2,)"),
+    ([np.nan, 0.0], "not finite"),
+])
+def test_bad_actions_are_refused_with_the_envs_message(env, action, fragment):
+    env.reset(seed=0)
+    size = env.action_space.shape[0]
+    if isinstance(action, np.ndarray):
+        action = np.zeros((1, size))
+    elif isinstance(action, list):
+        action = [np.nan] + [0.0] * (size - 1)
+    with pytest.raises(ValueError, match=fragment.replace("(", r"\(").replace(")", r"\)").replace("2", str(size))):
+        env.step(action)
+
+
+@pytest.mark.parametrize("kwargs, key", [
+    ({"granules": "200"}, "granules"),
+    ({"granules": True}, "granules"),
+    ({"scene_overrides": {"feed.angle_deg": float("nan")}}, "feed.angle_deg"),
+])
+def test_constructor_kwargs_follow_the_schema(kwargs, key):
+    with pytest.raises(ConfigError) as err:
+        gym.make(IDS[0], **kwargs)
+    assert err.value.key == key
+
+
+def test_spreader_tuning_refuses_a_step_after_the_episode_ended():
+    env = gym.make(IDS[1], granules=256, goal_cv_percent=1e4, disable_env_checker=True)
+    env.reset(seed=0)
+    _, _, terminated, _, _ = env.step(np.zeros(env.action_space.shape))
+    assert terminated  # any CV meets a goal of 1e4 %
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros(env.action_space.shape))
+    env.reset(seed=1)
+    env.step(np.zeros(env.action_space.shape))  # a reset starts a new episode
