@@ -10,7 +10,11 @@ class ConfigError(SpreadgymError):
 
     def __init__(self, key: str, message: str):
         self.key = key
+        self.message = message
         super().__init__(f"{key}: {message}")
+
+    def __reduce__(self):  # so the error crosses process boundaries (worker pools) intact
+        return type(self), (self.key, self.message)
 
 
 class MaterialError(SpreadgymError):

@@ -50,7 +50,7 @@ class Vanes(StrictModel):
     outer_radius_m: Optional[Real] = Field(default=None, gt=0, description="default: disc radius")
     thickness_m: Real = Field(gt=0, le=0.05)
     pitch_deg: Union[Real, list[Real]] = Field(
-        default=0.0, description="angle from radial, + = tip leans in the direction of rotation"
+        default=0.0, description="angle from radial, + = tip leans in the direction of rotation; each within +-60 deg"
     )
     height_m: Real = Field(default=0.03, gt=0, le=0.5, description="vane height (plan view: informational)")
     material: Optional[str] = Field(default=None, description="default: spinner material")

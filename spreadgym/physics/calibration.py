@@ -45,6 +45,9 @@ class CalibrationError(SpreadgymError):
         self.allowed = allowed
         super().__init__(f"{parameter}: {_show(value)} {allowed}")
 
+    def __reduce__(self):  # so the error crosses process boundaries (worker pools) intact
+        return type(self), (self.parameter, self.value, self.allowed)
+
 
 class PaperTableWarning(UserWarning):
     """The pair's printed Table 3 row failed the consistency check."""

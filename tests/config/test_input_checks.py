@@ -83,3 +83,14 @@ def test_a_shipped_name_wins_over_a_folder_of_that_name(tmp_path, monkeypatch):
     (tmp_path / "mine").mkdir()
     with pytest.raises(ConfigError, match="'mine' is a folder"):
         load_scene("mine")
+
+
+def test_errors_cross_process_boundaries_intact():
+    """A worker's error reaches the user as the same one-line error (pickled by pools)."""
+    import pickle
+
+    from spreadgym.physics.calibration import CalibrationError
+
+    for error in (ConfigError("a.b", "bad value"), CalibrationError("--mass", 2.0, "outside (0, 0.01] kg")):
+        again = pickle.loads(pickle.dumps(error))
+        assert type(again) is type(error) and str(again) == str(error)

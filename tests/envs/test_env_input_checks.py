@@ -65,3 +65,14 @@ def test_spreader_tuning_refuses_a_step_after_the_episode_ended():
         env.step(np.zeros(env.action_space.shape))
     env.reset(seed=1)
     env.step(np.zeros(env.action_space.shape))  # a reset starts a new episode
+
+
+def test_docs_list_the_accepted_range_of_every_key_as_the_schemas_say():
+    from pathlib import Path
+
+    from spreadgym.envs.config_doc import config_keys_markdown
+
+    doc = Path(__file__).resolve().parents[2] / "docs" / "config-keys.md"
+    assert doc.read_text(encoding="utf-8") == config_keys_markdown(), \
+        "docs/config-keys.md is stale: python -m spreadgym.envs.config_doc > docs/config-keys.md"
+    assert "| `flight.wind_m_s` |" in doc.read_text() and "each >= -20, <= 20" in doc.read_text()
