@@ -1,0 +1,195 @@
+"""One granule from the vane-top level to the rim: the event loop over the phases.
+
+Each granule is an independent small problem (granules never touch each other). The
+loop advances it by steps of at most P[STEP], cut at the vertical events
+(vertical_events), in one of two phases: free (free_motion) or pressed on a vane face
+(face_motion). Contacts change the phase:
+  * reaching a face, or an overlap with a vane found at the end of a step: an impact
+    (contact_law.impact, vane restitution and friction). A rebound that would come
+    back within one step is taken as plastic (the rest of the bounce sequence is
+    shorter than the step); a plastic impact on a flat face that the frame's forces
+    press the granule against starts the contact phase;
+  * a disc impact: the Coulomb friction impulse mu_d J_n against the velocity
+    relative to the disc (never reversing it), J_n = (1 + e) v at a rebound and v when
+    the granule comes to rest;
+  * a face phase ends when N reaches 0, at the end of the flat face, or when the
+    granule rises above the vane tops (it then passes over the vanes).
+Outcomes and state are those of the pymunk model (departure.py codes; state in the
+frame of the disc at time t).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from spreadgym.physics.compiled import face_motion, free_motion, vertical_events
+from spreadgym.physics.compiled.contact_law import disc_drag_impulse, frame_acceleration, impact
+from spreadgym.physics.compiled.layout import (
+    E_DISC, E_VANE, GRAVITY, HALF_THICKNESS, MU_DISC, MU_VANE, OMEGA, SETTLE_SPEED, STEP,
+    STUCK_SPEED, TIME_LIMIT, VANE_TOP, INV_KAPPA, LENGTH, NX, NY,
+)
+from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT
+
+MAX_LOOPS = 200_000  # guard: a granule still looping after this many events counts as timed out
+# Columns of the output state.
+CX, CY, VX, VY, SPIN, Z, VZ, TIME = range(8)
+OUT_SIZE = 8
+
+
+@njit(cache=True)
+def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
+    """Impact on a surface of normal n; (vx, vy, s, stays in contact)."""
+    omega, h = P[OMEGA], P[STEP]
+    bx, by, bs, approach = impact(vx, vy, s, nx, ny, radius, omega, P[E_VANE], P[MU_VANE], P[INV_KAPPA])
+    if approach <= 0.0:
+        return vx, vy, s, False
+    px, py, ps, _ = impact(vx, vy, s, nx, ny, radius, omega, 0.0, P[MU_VANE], P[INV_KAPPA])
+    ax, ay = frame_acceleration(cx, cy, px, py, omega)
+    press = -(ax * nx + ay * ny)
+    rebound = P[E_VANE] * approach
+    if press > 0.0 and 2.0 * rebound < press * h:
+        return px, py, ps, True
+    return bx, by, bs, False
+
+
+@njit(cache=True)
+def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P):
+    """(sticking, eps) for a granule on a face: it rolls (no slip) if it does not slip
+    and friction can hold that; otherwise it slides against its slip."""
+    omega = P[OMEGA]
+    sl = face_motion.slip(xd, s, frame, radius, omega)
+    tol = 1e-9 * (abs(xd) + radius * abs(omega))
+    if abs(sl) > tol:
+        return False, math.copysign(1.0, sl)
+    _, _, normal, f, _ = face_motion.forces(x, xd, s, True, 1.0, drag_sign, frame, radius, P)
+    if abs(f) <= P[MU_VANE] * max(normal, 0.0):
+        return True, 1.0
+    return False, -math.copysign(1.0, f)
+
+
+@njit(cache=True)
+def _drag_sign(x, xd, frame, resting, P):
+    """Direction of the disc's drag along the face (0 in the air); at x' = 0 it opposes the pull."""
+    if not resting:
+        return 0.0
+    if xd != 0.0:
+        return math.copysign(1.0, xd)
+    omega = P[OMEGA]
+    pull = omega * omega * ((frame[0] + x * frame[2]) * frame[2] + (frame[1] + x * frame[3]) * frame[3])
+    return math.copysign(1.0, pull)
+
+
+@njit(cache=True)
+def run_one(cx, cy, radius, z, vz, P, V, out, track):
+    """Follow one granule (start at rest in the machine frame at (cx, cy), base height z,
+    vertical speed vz); write its final state into `out`, its path into `track`
+    (rows of positions in the disc frame and times; NaN-padded). Returns its outcome."""
+    omega, g, top = P[OMEGA], P[GRAVITY], P[VANE_TOP]
+    reach = radius + P[HALF_THICKNESS]
+    vx, vy, s = omega * cy, -omega * cx, 0.0
+    resting = z <= 0.0
+    if resting:
+        z, vz = 0.0, 0.0
+    below = z < top
+    t = 0.0
+    on_face, entering, vane, side, sticking, eps = False, False, -1, 0.0, False, 1.0
+    frame = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    x, xd, length = 0.0, 0.0, 0.0
+    outcome = RETAINED_TIMEOUT
+    work = np.empty((2, face_motion.EVENTS))
+    n_track = track.shape[0]
+    for loop in range(MAX_LOOPS):
+        if loop < n_track:
+            track[loop, 0], track[loop, 1], track[loop, 2] = cx, cy, t
+        if t >= P[TIME_LIMIT]:
+            break
+        h, vertical = vertical_events.next_event(z, vz, resting, below, top, g, min(P[STEP], P[TIME_LIMIT] - t))
+        full = True
+        if on_face:
+            drag_sign = _drag_sign(x, xd, frame, resting, P)
+            x, xd, s, used, event = face_motion.step(x, xd, s, h, sticking, eps, drag_sign, frame, radius,
+                                                     length, P, work)
+            cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
+            vx, vy = xd * frame[2], xd * frame[3]
+            full = event == face_motion.NONE
+            if event == face_motion.RIM:
+                outcome = DEPARTED
+            elif event == face_motion.LEAVE_NORMAL or event == face_motion.END_OF_FACE:
+                on_face = False
+            elif event == face_motion.SLIP_CHANGE:
+                if sticking:
+                    _, _, _, f, _ = face_motion.forces(x, xd, s, True, 1.0, drag_sign, frame, radius, P)
+                    sticking, eps = False, -math.copysign(1.0, f)
+                else:
+                    sticking, eps = _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P)
+            elif event == face_motion.STOPPED:
+                xd, vx, vy = 0.0, 0.0, 0.0
+                pull = omega * omega * (cx * frame[2] + cy * frame[3])
+                if abs(pull) <= P[MU_DISC] * g:
+                    outcome = RETAINED_STUCK
+                else:
+                    sticking, eps = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P),
+                                                        frame, radius, P)
+        else:
+            drag = P[MU_DISC] * g if resting else 0.0
+            cx, cy, vx, vy, used, event, k, sd = free_motion.step(cx, cy, vx, vy, h, below, drag, reach, P, V)
+            full = event == free_motion.NONE
+            if event == free_motion.RIM:
+                outcome = DEPARTED
+            elif event == free_motion.FACE:
+                nx, ny = sd * V[k, NX], sd * V[k, NY]
+                vx, vy, s, stays = _catch(cx, cy, vx, vy, s, nx, ny, radius, P)
+                entering = stays
+                if stays:
+                    vane, side = k, sd
+            elif resting and omega * omega * math.sqrt(cx * cx + cy * cy) < P[MU_DISC] * g:
+                if math.sqrt(vx * vx + vy * vy) < P[STUCK_SPEED] + 2.0 * P[MU_DISC] * g * h:
+                    outcome = RETAINED_STUCK
+        z, vz = vertical_events.advance(z, vz, resting, used, g)
+        t += used
+        if outcome != RETAINED_TIMEOUT:
+            break
+        if full and vertical == vertical_events.DISC_IMPACT:
+            vz, resting, j = vertical_events.disc_impact(vz, P[E_DISC], P[SETTLE_SPEED])
+            z = 0.0
+            if on_face:
+                xd = math.copysign(max(abs(xd) - P[MU_DISC] * j, 0.0), xd)
+                vx, vy = xd * frame[2], xd * frame[3]
+            else:
+                vx, vy = disc_drag_impulse(vx, vy, P[MU_DISC] * j)
+        elif full and vertical == vertical_events.VANE_TOP_CROSSING:
+            below = not below
+            if not below:
+                on_face = False
+        if not on_face and below and event == free_motion.NONE:
+            k, sd, nx, ny, depth = free_motion.overlap(cx, cy, reach, V)
+            if k >= 0:
+                cx, cy = cx + depth * nx, cy + depth * ny
+                vx, vy, s, stays = _catch(cx, cy, vx, vy, s, nx, ny, radius, P)
+                entering = stays and sd != 0.0
+                if entering:
+                    vane, side = k, sd
+        if entering:
+            on_face, entering = True, False
+            frame = face_motion.face_frame(vane, side, reach, V)
+            length = V[vane, LENGTH]
+            x = (cx - frame[0]) * frame[2] + (cy - frame[1]) * frame[3]
+            xd = vx * frame[2] + vy * frame[3]
+            cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
+            vx, vy = xd * frame[2], xd * frame[3]
+            sticking, eps = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius, P)
+    out[CX], out[CY], out[VX], out[VY], out[SPIN] = cx, cy, vx, vy, s
+    out[Z], out[VZ], out[TIME] = z, vz, t
+    return outcome
+
+
+@njit(cache=True)
+def run_all(start, radius, z0, vz0, P, V, out, outcome, tracks):
+    """Every granule in turn; tracks (k, T, 3) for the first k granules."""
+    empty = np.empty((0, 3))
+    for i in range(start.shape[0]):
+        track = tracks[i] if i < tracks.shape[0] else empty
+        outcome[i] = run_one(start[i, 0], start[i, 1], radius[i], z0, vz0, P, V, out[i], track)
