@@ -4,9 +4,10 @@ Fourth-order Runge-Kutta steps of the free acceleration (contact_law). A step en
 early at the first event inside it, located on the continuous path (a crossing of a
 face line or of the rim is found by regula falsi on re-integrated sub-steps, so a
 fast granule cannot jump through a vane): the centre reaches the disc radius, or the
-granule, below the vane tops, reaches a vane face from outside. Contacts with a
-vane's rounded ends, and a granule that comes down onto a vane, are found as
-overlaps at the end of a step (`overlap`).
+granule, below the vane tops, reaches a vane face from outside (also the return
+after a rebound off that face, however short the flight) or one of its rounded
+ends. A granule that comes down onto a vane, or keeps pressing on a rounded end, is
+found as an overlap at the end of a step (`overlap`).
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ from spreadgym.physics.compiled.layout import DISC_RADIUS, LENGTH, NX, NY, OMEGA
 NONE = 0
 RIM = 1
 FACE = 2
+END_CAP = 3  # a rounded end of a vane (side 0: inner end, 1: tip)
 REFINE_ITERATIONS = 3
-ON_SURFACE_M = 1e-12  # a face crossing counts only from farther than this outside
+ON_SURFACE_M = 1e-12  # closer than this to a face line counts as on it (a rebound starts there)
 
 
 @njit(cache=True)
@@ -48,8 +50,18 @@ def _event_value(kind, vane, side, cx, cy, reach, P, V):
     if kind == RIM:
         r = P[DISC_RADIUS]
         return r * r - cx * cx - cy * cy
+    if kind == END_CAP:
+        ex, ey = end_point(vane, side, V)
+        return math.sqrt((cx - ex) ** 2 + (cy - ey) ** 2) - reach
     d = (cx - V[vane, PX]) * V[vane, NX] + (cy - V[vane, PY]) * V[vane, NY]
     return side * d - reach
+
+
+@njit(cache=True)
+def end_point(vane, end, V):
+    """Inner end (end 0) or tip (end 1) of a vane's centre line."""
+    length = end * V[vane, LENGTH]
+    return V[vane, PX] + length * V[vane, UX], V[vane, PY] + length * V[vane, UY]
 
 
 @njit(cache=True)
@@ -64,29 +76,49 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     g1 = _event_value(RIM, 0, 0.0, ex, ey, reach, P, V)
     if g1 < 0.0:
         best, kind = max(g0, 0.0) / (max(g0, 0.0) - g1), RIM
+    lo, g_lo = 0.0, max(g0, 0.0)
     if below:
+        ax, ay = free_acceleration(cx, cy, vx, vy, omega, drag)
         for k in range(V.shape[0]):
             for sd in (1.0, -1.0):
                 g0 = _event_value(FACE, k, sd, cx, cy, reach, P, V)
                 g1 = _event_value(FACE, k, sd, ex, ey, reach, P, V)
-                if g0 <= ON_SURFACE_M or g1 >= 0.0:
-                    continue  # a granule leaving a face starts on it: re-contacts are overlaps
-                f = g0 / (g0 - g1)
+                if g1 >= 0.0 or g0 < -ON_SURFACE_M:
+                    continue
+                f_lo = 0.0
+                if g0 <= ON_SURFACE_M:
+                    # on the face at the start (a rebound): the return, bracketed from the
+                    # lower half of the parabola g = vn t - press t^2 / 2
+                    vn = sd * (vx * V[k, NX] + vy * V[k, NY])
+                    press = -sd * (ax * V[k, NX] + ay * V[k, NY])
+                    if vn <= 0.0 or press <= 0.0:
+                        continue
+                    f_lo = min(vn / (press * h), 0.5)
+                    lx, ly, _, _ = rk4(cx, cy, vx, vy, f_lo * h, omega, drag)
+                    g0 = _event_value(FACE, k, sd, lx, ly, reach, P, V)
+                    if g0 <= 0.0:
+                        continue
+                f = f_lo + (1.0 - f_lo) * g0 / (g0 - g1)
                 if f >= best:
                     continue
                 # along the vane at the crossing: within the flat face?
                 mx, my = cx + f * (ex - cx), cy + f * (ey - cy)
                 x = (mx - V[k, PX]) * V[k, UX] + (my - V[k, PY]) * V[k, UY]
                 if 0.0 <= x <= V[k, LENGTH]:
-                    best, kind, vane, side = f, FACE, k, sd
+                    best, kind, vane, side, lo, g_lo = f, FACE, k, sd, f_lo, g0
+            for end in (0.0, 1.0):
+                g0 = _event_value(END_CAP, k, end, cx, cy, reach, P, V)
+                g1 = _event_value(END_CAP, k, end, ex, ey, reach, P, V)
+                if g0 > ON_SURFACE_M and g1 < 0.0:
+                    f = g0 / (g0 - g1)
+                    if f < best:
+                        best, kind, vane, side, lo, g_lo = f, END_CAP, k, end, 0.0, g0
     if kind == NONE:
         return ex, ey, evx, evy, h, NONE, -1, 0.0
     # regula falsi (Illinois) on the re-integrated path
-    lo, hi = 0.0, 1.0
-    g_lo = _event_value(kind, vane, side, cx, cy, reach, P, V)
+    hi = 1.0
     g_hi = _event_value(kind, vane, side, ex, ey, reach, P, V)
     f = best
-    sx, sy, svx, svy = ex, ey, evx, evy
     for _ in range(REFINE_ITERATIONS):
         sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)
         g = _event_value(kind, vane, side, sx, sy, reach, P, V)
@@ -96,8 +128,13 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
         else:
             lo, g_lo = f, g
             g_hi *= 0.5
+        if g_lo == g_hi:
+            break
         f = lo + (hi - lo) * g_lo / (g_lo - g_hi)
     sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)
+    if kind == FACE:  # exactly on the face line: a rebound starts from it
+        g = _event_value(kind, vane, side, sx, sy, reach, P, V)
+        sx, sy = sx - g * side * V[vane, NX], sy - g * side * V[vane, NY]
     return sx, sy, svx, svy, f * h, kind, vane, side
 
 

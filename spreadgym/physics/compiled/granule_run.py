@@ -5,10 +5,10 @@ loop advances it by steps of at most P[STEP], cut at the vertical events
 (vertical_events), in one of two phases: free (free_motion) or pressed on a vane face
 (face_motion). Contacts change the phase:
   * reaching a face, or an overlap with a vane found at the end of a step: an impact
-    (contact_law.impact, vane restitution and friction). A rebound that would come
-    back within one step is taken as plastic (the rest of the bounce sequence is
-    shorter than the step); a plastic impact on a flat face that the frame's forces
-    press the granule against starts the contact phase;
+    (contact_law.impact, vane restitution and friction). Every rebound is followed
+    until its flight would be shorter than the full model's time step; that impact is
+    plastic, and on a flat face that the frame's forces press the granule against it
+    starts the contact phase;
   * a disc impact: the Coulomb friction impulse mu_d J_n against the velocity
     relative to the disc (never reversing it), J_n = (1 + e) v at a rebound and v when
     the granule comes to rest;
@@ -29,45 +29,51 @@ from spreadgym.physics.compiled import face_motion, free_motion, vertical_events
 from spreadgym.physics.compiled.contact_law import disc_drag_impulse, frame_acceleration, impact
 from spreadgym.physics.compiled.layout import (
     E_DISC, E_VANE, GRAVITY, HALF_THICKNESS, MU_DISC, MU_VANE, OMEGA, SETTLE_SPEED, STEP,
-    STUCK_SPEED, TIME_LIMIT, VANE_TOP, INV_KAPPA, LENGTH, NX, NY,
+    STUCK_SPEED, TIME_LIMIT, REBOUND_FLIGHT, VANE_TOP, INV_KAPPA, LENGTH, NX, NY,
 )
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT
 
 MAX_LOOPS = 200_000  # guard: a granule still looping after this many events counts as timed out
-# Columns of the output state.
-CX, CY, VX, VY, SPIN, Z, VZ, TIME = range(8)
-OUT_SIZE = 8
+MAX_STALLED = 1000  # guard: events in a row that do not advance time end the run (flagged)
+# Columns of the output state; STALLED is 1 for a run a guard ended.
+CX, CY, VX, VY, SPIN, Z, VZ, TIME, STALLED = range(9)
+OUT_SIZE = 9
 
 
 @njit(cache=True)
 def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
-    """Impact on a surface of normal n; (vx, vy, s, stays in contact)."""
-    omega, h = P[OMEGA], P[STEP]
+    """Impact on a surface of normal n; (vx, vy, s, stays in contact). A rebound whose
+    flight back (2 e a / press) would be shorter than P[REBOUND_FLIGHT] ends the
+    bouncing: that impact is plastic, and the granule stays on a face the frame presses
+    it on."""
+    omega = P[OMEGA]
     bx, by, bs, approach = impact(vx, vy, s, nx, ny, radius, omega, P[E_VANE], P[MU_VANE], P[INV_KAPPA])
     if approach <= 0.0:
         return vx, vy, s, False
     px, py, ps, _ = impact(vx, vy, s, nx, ny, radius, omega, 0.0, P[MU_VANE], P[INV_KAPPA])
     ax, ay = frame_acceleration(cx, cy, px, py, omega)
     press = -(ax * nx + ay * ny)
-    rebound = P[E_VANE] * approach
-    if press > 0.0 and 2.0 * rebound < press * h:
+    if press > 0.0 and 2.0 * P[E_VANE] * approach < press * P[REBOUND_FLIGHT]:
         return px, py, ps, True
     return bx, by, bs, False
 
 
 @njit(cache=True)
-def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P):
-    """(sticking, eps) for a granule on a face: it rolls (no slip) if it does not slip
-    and friction can hold that; otherwise it slides against its slip."""
+def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, slip_is_zero):
+    """(sticking, eps, x') for a granule on a face: it rolls (no slip) if it does not slip
+    and friction can hold that; otherwise it slides against its slip. `slip_is_zero`:
+    the slip has just reached 0; its remainder (the error of the located event) is
+    taken off x' so the new phase starts exactly at zero slip."""
     omega = P[OMEGA]
     sl = face_motion.slip(xd, s, frame, radius, omega)
     tol = 1e-9 * (abs(xd) + radius * abs(omega))
-    if abs(sl) > tol:
-        return False, math.copysign(1.0, sl)
+    if not slip_is_zero and abs(sl) > tol:
+        return False, math.copysign(1.0, sl), xd
+    xd -= sl
     _, _, normal, f, _ = face_motion.forces(x, xd, s, True, 1.0, drag_sign, frame, radius, P)
     if abs(f) <= P[MU_VANE] * max(normal, 0.0):
-        return True, 1.0
-    return False, -math.copysign(1.0, f)
+        return True, 1.0, xd
+    return False, -math.copysign(1.0, f), xd
 
 
 @njit(cache=True)
@@ -101,6 +107,7 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
     outcome = RETAINED_TIMEOUT
     work = np.empty((2, face_motion.EVENTS))
     n_track = track.shape[0]
+    stalled, loop = 0, 0
     for loop in range(MAX_LOOPS):
         if loop < n_track:
             track[loop, 0], track[loop, 1], track[loop, 2] = cx, cy, t
@@ -124,15 +131,15 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
                     _, _, _, f, _ = face_motion.forces(x, xd, s, True, 1.0, drag_sign, frame, radius, P)
                     sticking, eps = False, -math.copysign(1.0, f)
                 else:
-                    sticking, eps = _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P)
+                    sticking, eps, xd = _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, True)
             elif event == face_motion.STOPPED:
                 xd, vx, vy = 0.0, 0.0, 0.0
                 pull = omega * omega * (cx * frame[2] + cy * frame[3])
                 if abs(pull) <= P[MU_DISC] * g:
                     outcome = RETAINED_STUCK
                 else:
-                    sticking, eps = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P),
-                                                        frame, radius, P)
+                    sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P),
+                                                        frame, radius, P, False)
         else:
             drag = P[MU_DISC] * g if resting else 0.0
             cx, cy, vx, vy, used, event, k, sd = free_motion.step(cx, cy, vx, vy, h, below, drag, reach, P, V)
@@ -145,11 +152,18 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
                 entering = stays
                 if stays:
                     vane, side = k, sd
+            elif event == free_motion.END_CAP:
+                ex, ey = free_motion.end_point(k, sd, V)
+                gap = math.sqrt((cx - ex) ** 2 + (cy - ey) ** 2)
+                vx, vy, s, _ = _catch(cx, cy, vx, vy, s, (cx - ex) / gap, (cy - ey) / gap, radius, P)
             elif resting and omega * omega * math.sqrt(cx * cx + cy * cy) < P[MU_DISC] * g:
                 if math.sqrt(vx * vx + vy * vy) < P[STUCK_SPEED] + 2.0 * P[MU_DISC] * g * h:
                     outcome = RETAINED_STUCK
         z, vz = vertical_events.advance(z, vz, resting, used, g)
         t += used
+        stalled = stalled + 1 if used == 0.0 else 0
+        if stalled >= MAX_STALLED:
+            break
         if outcome != RETAINED_TIMEOUT:
             break
         if full and vertical == vertical_events.DISC_IMPACT:
@@ -158,6 +172,8 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
             if on_face:
                 xd = math.copysign(max(abs(xd) - P[MU_DISC] * j, 0.0), xd)
                 vx, vy = xd * frame[2], xd * frame[3]
+                sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius,
+                                                    P, False)
             else:
                 vx, vy = disc_drag_impulse(vx, vy, P[MU_DISC] * j)
         elif full and vertical == vertical_events.VANE_TOP_CROSSING:
@@ -180,9 +196,11 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
             xd = vx * frame[2] + vy * frame[3]
             cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
             vx, vy = xd * frame[2], xd * frame[3]
-            sticking, eps = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius, P)
+            sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius, P,
+                                                False)
     out[CX], out[CY], out[VX], out[VY], out[SPIN] = cx, cy, vx, vy, s
     out[Z], out[VZ], out[TIME] = z, vz, t
+    out[STALLED] = 1.0 if (stalled >= MAX_STALLED or loop == MAX_LOOPS - 1) and outcome == RETAINED_TIMEOUT else 0.0
     return outcome
 
 

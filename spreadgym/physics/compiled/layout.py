@@ -30,20 +30,23 @@ TIME_LIMIT = 10  # s on the spinner before a granule counts as retained
 HALF_THICKNESS = 11  # half the vane thickness, m
 INV_KAPPA = 12  # m r^2 / I of a granule: 1/0.4 for a free sphere, 0 for locked rotation
 STUCK_SPEED = 13  # m/s: slower than this (and held by static friction) counts as stuck
-P_SIZE = 14
+REBOUND_FLIGHT = 14  # s: a rebound off a vane whose flight would be shorter ends the bouncing
+P_SIZE = 15
 
 # Columns of V (one row per vane): inner end p, unit vector u along the vane,
 # leading-face normal n (towards the direction of rotation), length of the centre line.
 PX, PY, UX, UY, NX, NY, LENGTH = range(7)
 V_SIZE = 7
 
-OMEGA_STEP = 0.02
-"""|omega| * step: the fourth-order steps resolve the slide (growth rate ~|omega|) to ~1e-8."""
+OMEGA_STEP = 0.05
+"""|omega| * step. Measured against 0.005 (4096 granules, paper and field scenes): departure
+speed within 5e-3 m/s and direction within 0.02 deg for 90 % of granules."""
 
 
-def pack_parameters(scene: Scene, contacts: Contacts, settle_speed_m_s: float, time_limit_s: float,
+def pack_parameters(scene: Scene, contacts: Contacts, resolved_s: float, time_limit_s: float,
                     stuck_speed_m_s: float) -> np.ndarray:
-    """The scalar array P of the kernels."""
+    """The scalar array P of the kernels. `resolved_s`: the shortest bounce (off the disc
+    or a vane) that is still followed; shorter ones end the bouncing."""
     omega = scene.spinner.omega_rad_s
     p = np.zeros(P_SIZE)
     p[OMEGA] = omega
@@ -53,7 +56,8 @@ def pack_parameters(scene: Scene, contacts: Contacts, settle_speed_m_s: float, t
     p[MU_VANE], p[E_VANE] = contacts.vane_friction, contacts.vane_restitution
     p[GRAVITY] = GRAVITY_M_S2
     p[STEP] = OMEGA_STEP / abs(omega)
-    p[SETTLE_SPEED] = settle_speed_m_s
+    p[SETTLE_SPEED] = 0.5 * GRAVITY_M_S2 * resolved_s
+    p[REBOUND_FLIGHT] = resolved_s
     p[TIME_LIMIT] = time_limit_s
     p[HALF_THICKNESS] = 0.5 * scene.vanes.thickness_m
     p[INV_KAPPA] = 0.0 if scene.granule.rotation == "locked" else 1.0 / SPHERE_INERTIA_FACTOR

@@ -20,7 +20,7 @@ from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import GranuleBatch, rotate
 from spreadgym.physics.numerics import choose_time_step
 from spreadgym.physics.stepped.pymunk_spinner import MAX_SPINNER_TIME_S, STUCK_SPEED_M_S
-from spreadgym.physics.vertical import GRAVITY_M_S2, free_fall_to
+from spreadgym.physics.vertical import free_fall_to
 
 MAX_TRACK_POINTS = 20_000
 
@@ -34,8 +34,8 @@ def simulate_compiled(
 ) -> Departure:
     """Departure states of `granules` (machine frame, SI units); `track_count` paths kept.
 
-    The disc's rest criterion for bounces is the pymunk model's (a rebound shorter than
-    its time step ends the bouncing), so both models settle the same granules.
+    Bounces (off the disc and off the vanes) are followed down to a flight as short as
+    the pymunk model's time step; shorter ones end the bouncing, as they do there.
     """
     omega = scene.spinner.omega_rad_s
     vane_top = scene.vanes.height_m
@@ -44,8 +44,8 @@ def simulate_compiled(
     z0 = min(drop, vane_top)
     spinner_angle = granules.phase_rad + omega * t_fall
     start = np.ascontiguousarray(rotate(granules.release_xy_m, -spinner_angle))
-    settle_dt = choose_time_step(scene, float(granules.radius_m.min())).dt_s
-    params = pack_parameters(scene, contacts, 0.5 * GRAVITY_M_S2 * settle_dt, MAX_SPINNER_TIME_S, STUCK_SPEED_M_S)
+    resolved = choose_time_step(scene, float(granules.radius_m.min())).dt_s
+    params = pack_parameters(scene, contacts, resolved, MAX_SPINNER_TIME_S, STUCK_SPEED_M_S)
     vanes = pack_vanes(scene)
     n = granules.count
     out = np.zeros((n, granule_run.OUT_SIZE))
@@ -62,6 +62,14 @@ def simulate_compiled(
     v = out[:, [granule_run.VX, granule_run.VY]]
     v_inertial = v + omega * np.stack([-c[:, 1], c[:, 0]], axis=1)
     turn = spinner_angle + omega * t
+    notes = [
+        f"largest step {params[STEP]:.3g} s (|omega| dt = {OMEGA_STEP:g}), cut at every event "
+        "(disc impacts, vane contacts, rolling/sliding changes, the rim)",
+        f"free fall above the vane tops solved exactly ({t_fall * 1e3:.1f} ms)",
+    ]
+    stalled = int(out[:, granule_run.STALLED].sum())
+    if stalled:
+        notes.append(f"{stalled} granule(s) stopped by the event-loop guard, counted as timed out")
     return Departure(
         position_m=rotate(c, turn),
         velocity_m_s=rotate(v_inertial, turn),
@@ -72,11 +80,7 @@ def simulate_compiled(
         outcome=outcome,
         model="compiled",
         dt_s=float(params[STEP]),
-        notes=[
-            f"largest step {params[STEP]:.3g} s (|omega| dt = {OMEGA_STEP:g}), cut at every event "
-            "(disc impacts, vane contacts, rolling/sliding changes, the rim)",
-            f"free fall above the vane tops solved exactly ({t_fall * 1e3:.1f} ms)",
-        ],
+        notes=notes,
         tracks=[_machine_track(tracks[k], spinner_angle[k], omega, rotate(c[k:k + 1], turn[k:k + 1])[0])
                 for k in range(n_track)],
     )
