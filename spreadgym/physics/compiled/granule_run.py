@@ -108,7 +108,27 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
     work = np.empty((2, face_motion.EVENTS))
     n_track = track.shape[0]
     stalled, loop = 0, 0
+    check_overlap = below  # released onto a vane: pushed off it before anything moves
     for loop in range(MAX_LOOPS):
+        if check_overlap:
+            check_overlap = False
+            k, sd, nx, ny, depth = free_motion.overlap(cx, cy, reach, V)
+            if k >= 0:
+                cx, cy = cx + depth * nx, cy + depth * ny
+                vx, vy, s, stays = _catch(cx, cy, vx, vy, s, nx, ny, radius, P)
+                entering = stays and sd != 0.0
+                if entering:
+                    vane, side = k, sd
+        if entering:
+            on_face, entering = True, False
+            frame = face_motion.face_frame(vane, side, reach, V)
+            length = V[vane, LENGTH]
+            x = (cx - frame[0]) * frame[2] + (cy - frame[1]) * frame[3]
+            xd = vx * frame[2] + vy * frame[3]
+            cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
+            vx, vy = xd * frame[2], xd * frame[3]
+            sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius, P,
+                                                False)
         if loop < n_track:
             track[loop, 0], track[loop, 1], track[loop, 2] = cx, cy, t
         if t >= P[TIME_LIMIT]:
@@ -181,23 +201,7 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
             if not below:
                 on_face = False
         if not on_face and below and event == free_motion.NONE:
-            k, sd, nx, ny, depth = free_motion.overlap(cx, cy, reach, V)
-            if k >= 0:
-                cx, cy = cx + depth * nx, cy + depth * ny
-                vx, vy, s, stays = _catch(cx, cy, vx, vy, s, nx, ny, radius, P)
-                entering = stays and sd != 0.0
-                if entering:
-                    vane, side = k, sd
-        if entering:
-            on_face, entering = True, False
-            frame = face_motion.face_frame(vane, side, reach, V)
-            length = V[vane, LENGTH]
-            x = (cx - frame[0]) * frame[2] + (cy - frame[1]) * frame[3]
-            xd = vx * frame[2] + vy * frame[3]
-            cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
-            vx, vy = xd * frame[2], xd * frame[3]
-            sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius, P,
-                                                False)
+            check_overlap = True
     out[CX], out[CY], out[VX], out[VY], out[SPIN] = cx, cy, vx, vy, s
     out[Z], out[VZ], out[TIME] = z, vz, t
     out[STALLED] = 1.0 if (stalled >= MAX_STALLED or loop == MAX_LOOPS - 1) and outcome == RETAINED_TIMEOUT else 0.0
