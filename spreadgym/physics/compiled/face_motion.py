@@ -20,7 +20,18 @@ from __future__ import annotations
 from numba import njit
 
 from spreadgym.physics.compiled.layout import (
-    DISC_RADIUS, GRAVITY, INV_KAPPA, LENGTH, MU_DISC, MU_VANE, NX, NY, OMEGA, PX, PY, UX, UY,
+    DISC_RADIUS,
+    GRAVITY,
+    INV_KAPPA,
+    MU_DISC,
+    MU_VANE,
+    NX,
+    NY,
+    OMEGA,
+    PX,
+    PY,
+    UX,
+    UY,
 )
 
 NONE = 0

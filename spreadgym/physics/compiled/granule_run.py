@@ -28,8 +28,23 @@ from numba import njit
 from spreadgym.physics.compiled import face_motion, free_motion, vertical_events
 from spreadgym.physics.compiled.contact_law import disc_drag_impulse, frame_acceleration, impact
 from spreadgym.physics.compiled.layout import (
-    E_DISC, E_VANE, GRAVITY, HALF_THICKNESS, MU_DISC, MU_VANE, OMEGA, SETTLE_SPEED, STEP,
-    STUCK_SPEED, TIME_LIMIT, REBOUND_FLIGHT, VANE_TOP, INV_KAPPA, LENGTH, NX, NY,
+    E_DISC,
+    E_VANE,
+    GRAVITY,
+    HALF_THICKNESS,
+    INV_KAPPA,
+    LENGTH,
+    MU_DISC,
+    MU_VANE,
+    NX,
+    NY,
+    OMEGA,
+    REBOUND_FLIGHT,
+    SETTLE_SPEED,
+    STEP,
+    STUCK_SPEED,
+    TIME_LIMIT,
+    VANE_TOP,
 )
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT
 
