@@ -16,7 +16,7 @@ from __future__ import annotations
 from spreadgym.config.scene import Scene
 from spreadgym.errors import ConfigError
 
-MODELS = ("auto", "analytic", "pymunk", "spring-damper")
+MODELS = ("auto", "analytic", "pymunk", "spring-damper", "compiled")
 
 
 def choose_model(scene: Scene, requested: str = "auto") -> tuple[str, str]:

@@ -54,6 +54,10 @@ def run_spinner(
         return simulate_pymunk(scene, granules, contacts, progress=progress, track_count=tracks)
     if model == "spring-damper":
         return simulate_spring_damper(scene, granules, contacts, progress=progress, track_count=tracks)
+    if model == "compiled":
+        from spreadgym.physics.compiled import simulate_compiled  # numba loads only when asked for
+
+        return simulate_compiled(scene, granules, contacts, progress=progress, track_count=tracks)
     raise AssertionError(f"model {model!r} has no runner")  # choose_model validated it
 
 

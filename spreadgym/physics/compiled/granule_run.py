@@ -1,0 +1,232 @@
+"""One granule from the vane-top level to the rim: the event loop over the phases.
+
+Each granule is an independent small problem (granules never touch each other). The
+loop advances it by steps of at most P[STEP], cut at the vertical events
+(vertical_events), in one of two phases: free (free_motion) or pressed on a vane face
+(face_motion). Contacts change the phase:
+  * reaching a face, or an overlap with a vane found at the end of a step: an impact
+    (contact_law.impact, vane restitution and friction). Every rebound is followed
+    until its flight would be shorter than the full model's time step; that impact is
+    plastic, and on a flat face that the frame's forces press the granule against it
+    starts the contact phase;
+  * a disc impact: the Coulomb friction impulse mu_d J_n against the velocity
+    relative to the disc (never reversing it), J_n = (1 + e) v at a rebound and v when
+    the granule comes to rest;
+  * a face phase ends when N reaches 0, at the end of the flat face, or when the
+    granule rises above the vane tops (it then passes over the vanes).
+Outcomes and state are those of the pymunk model (departure.py codes; state in the
+frame of the disc at time t).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from spreadgym.physics.compiled import face_motion, free_motion, vertical_events
+from spreadgym.physics.compiled.contact_law import disc_drag_impulse, frame_acceleration, impact
+from spreadgym.physics.compiled.layout import (
+    E_DISC,
+    E_VANE,
+    GRAVITY,
+    HALF_THICKNESS,
+    INV_KAPPA,
+    LENGTH,
+    MU_DISC,
+    MU_VANE,
+    NX,
+    NY,
+    OMEGA,
+    REBOUND_FLIGHT,
+    SETTLE_SPEED,
+    STEP,
+    STUCK_SPEED,
+    TIME_LIMIT,
+    VANE_TOP,
+)
+from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT
+
+MAX_LOOPS = 200_000  # guard: a granule still looping after this many events counts as timed out
+MAX_STALLED = 1000  # guard: events in a row that do not advance time end the run (flagged)
+# Columns of the output state; STALLED is 1 for a run a guard ended.
+CX, CY, VX, VY, SPIN, Z, VZ, TIME, STALLED = range(9)
+OUT_SIZE = 9
+
+
+@njit(cache=True)
+def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
+    """Impact on a surface of normal n; (vx, vy, s, stays in contact). A rebound whose
+    flight back (2 e a / press) would be shorter than P[REBOUND_FLIGHT] ends the
+    bouncing: that impact is plastic, and the granule stays on a face the frame presses
+    it on."""
+    omega = P[OMEGA]
+    bx, by, bs, approach = impact(vx, vy, s, nx, ny, radius, omega, P[E_VANE], P[MU_VANE], P[INV_KAPPA])
+    if approach <= 0.0:
+        return vx, vy, s, False
+    px, py, ps, _ = impact(vx, vy, s, nx, ny, radius, omega, 0.0, P[MU_VANE], P[INV_KAPPA])
+    ax, ay = frame_acceleration(cx, cy, px, py, omega)
+    press = -(ax * nx + ay * ny)
+    if press > 0.0 and 2.0 * P[E_VANE] * approach < press * P[REBOUND_FLIGHT]:
+        return px, py, ps, True
+    return bx, by, bs, False
+
+
+@njit(cache=True)
+def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, slip_is_zero):
+    """(sticking, eps, x') for a granule on a face: it rolls (no slip) if it does not slip
+    and friction can hold that; otherwise it slides against its slip. `slip_is_zero`:
+    the slip has just reached 0; its remainder (the error of the located event) is
+    taken off x' so the new phase starts exactly at zero slip."""
+    omega = P[OMEGA]
+    sl = face_motion.slip(xd, s, frame, radius, omega)
+    tol = 1e-9 * (abs(xd) + radius * abs(omega))
+    if not slip_is_zero and abs(sl) > tol:
+        return False, math.copysign(1.0, sl), xd
+    xd -= sl
+    _, _, normal, f, _ = face_motion.forces(x, xd, s, True, 1.0, drag_sign, frame, radius, P)
+    if abs(f) <= P[MU_VANE] * max(normal, 0.0):
+        return True, 1.0, xd
+    return False, -math.copysign(1.0, f), xd
+
+
+@njit(cache=True)
+def _drag_sign(x, xd, frame, resting, P):
+    """Direction of the disc's drag along the face (0 in the air); at x' = 0 it opposes the pull."""
+    if not resting:
+        return 0.0
+    if xd != 0.0:
+        return math.copysign(1.0, xd)
+    omega = P[OMEGA]
+    pull = omega * omega * ((frame[0] + x * frame[2]) * frame[2] + (frame[1] + x * frame[3]) * frame[3])
+    return math.copysign(1.0, pull)
+
+
+@njit(cache=True)
+def run_one(cx, cy, radius, z, vz, P, V, out, track):
+    """Follow one granule (start at rest in the machine frame at (cx, cy), base height z,
+    vertical speed vz); write its final state into `out`, its path into `track`
+    (rows of positions in the disc frame and times; NaN-padded). Returns its outcome."""
+    omega, g, top = P[OMEGA], P[GRAVITY], P[VANE_TOP]
+    reach = radius + P[HALF_THICKNESS]
+    vx, vy, s = omega * cy, -omega * cx, 0.0
+    resting = z <= 0.0
+    if resting:
+        z, vz = 0.0, 0.0
+    below = z < top
+    t = 0.0
+    on_face, entering, vane, side, sticking, eps = False, False, -1, 0.0, False, 1.0
+    frame = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    x, xd, length = 0.0, 0.0, 0.0
+    outcome = RETAINED_TIMEOUT
+    work = np.empty((2, face_motion.EVENTS))
+    n_track = track.shape[0]
+    stalled, loop = 0, 0
+    check_overlap = below  # released onto a vane: pushed off it before anything moves
+    for loop in range(MAX_LOOPS):
+        if check_overlap:
+            check_overlap = False
+            k, sd, nx, ny, depth = free_motion.overlap(cx, cy, reach, V)
+            if k >= 0:
+                cx, cy = cx + depth * nx, cy + depth * ny
+                vx, vy, s, stays = _catch(cx, cy, vx, vy, s, nx, ny, radius, P)
+                entering = stays and sd != 0.0
+                if entering:
+                    vane, side = k, sd
+        if entering:
+            on_face, entering = True, False
+            frame = face_motion.face_frame(vane, side, reach, V)
+            length = V[vane, LENGTH]
+            x = (cx - frame[0]) * frame[2] + (cy - frame[1]) * frame[3]
+            xd = vx * frame[2] + vy * frame[3]
+            cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
+            vx, vy = xd * frame[2], xd * frame[3]
+            sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius, P,
+                                                False)
+        if loop < n_track:
+            track[loop, 0], track[loop, 1], track[loop, 2] = cx, cy, t
+        if t >= P[TIME_LIMIT]:
+            break
+        h, vertical = vertical_events.next_event(z, vz, resting, below, top, g, min(P[STEP], P[TIME_LIMIT] - t))
+        full = True
+        if on_face:
+            drag_sign = _drag_sign(x, xd, frame, resting, P)
+            x, xd, s, used, event = face_motion.step(x, xd, s, h, sticking, eps, drag_sign, frame, radius,
+                                                     length, P, work)
+            cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
+            vx, vy = xd * frame[2], xd * frame[3]
+            full = event == face_motion.NONE
+            if event == face_motion.RIM:
+                outcome = DEPARTED
+            elif event == face_motion.LEAVE_NORMAL or event == face_motion.END_OF_FACE:
+                on_face = False
+            elif event == face_motion.SLIP_CHANGE:
+                if sticking:
+                    _, _, _, f, _ = face_motion.forces(x, xd, s, True, 1.0, drag_sign, frame, radius, P)
+                    sticking, eps = False, -math.copysign(1.0, f)
+                else:
+                    sticking, eps, xd = _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, True)
+            elif event == face_motion.STOPPED:
+                xd, vx, vy = 0.0, 0.0, 0.0
+                pull = omega * omega * (cx * frame[2] + cy * frame[3])
+                if abs(pull) <= P[MU_DISC] * g:
+                    outcome = RETAINED_STUCK
+                else:
+                    sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P),
+                                                        frame, radius, P, False)
+        else:
+            drag = P[MU_DISC] * g if resting else 0.0
+            cx, cy, vx, vy, used, event, k, sd = free_motion.step(cx, cy, vx, vy, h, below, drag, reach, P, V)
+            full = event == free_motion.NONE
+            if event == free_motion.RIM:
+                outcome = DEPARTED
+            elif event == free_motion.FACE:
+                nx, ny = sd * V[k, NX], sd * V[k, NY]
+                vx, vy, s, stays = _catch(cx, cy, vx, vy, s, nx, ny, radius, P)
+                entering = stays
+                if stays:
+                    vane, side = k, sd
+            elif event == free_motion.END_CAP:
+                ex, ey = free_motion.end_point(k, sd, V)
+                gap = math.sqrt((cx - ex) ** 2 + (cy - ey) ** 2)
+                vx, vy, s, _ = _catch(cx, cy, vx, vy, s, (cx - ex) / gap, (cy - ey) / gap, radius, P)
+            elif resting and omega * omega * math.sqrt(cx * cx + cy * cy) < P[MU_DISC] * g:
+                if math.sqrt(vx * vx + vy * vy) < P[STUCK_SPEED] + 2.0 * P[MU_DISC] * g * h:
+                    outcome = RETAINED_STUCK
+        z, vz = vertical_events.advance(z, vz, resting, used, g)
+        t += used
+        stalled = stalled + 1 if used == 0.0 else 0
+        if stalled >= MAX_STALLED:
+            break
+        if outcome != RETAINED_TIMEOUT:
+            break
+        if full and vertical == vertical_events.DISC_IMPACT:
+            vz, resting, j = vertical_events.disc_impact(vz, P[E_DISC], P[SETTLE_SPEED])
+            z = 0.0
+            if on_face:
+                xd = math.copysign(max(abs(xd) - P[MU_DISC] * j, 0.0), xd)
+                vx, vy = xd * frame[2], xd * frame[3]
+                sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius,
+                                                    P, False)
+            else:
+                vx, vy = disc_drag_impulse(vx, vy, P[MU_DISC] * j)
+        elif full and vertical == vertical_events.VANE_TOP_CROSSING:
+            below = not below
+            if not below:
+                on_face = False
+        if not on_face and below and event == free_motion.NONE:
+            check_overlap = True
+    out[CX], out[CY], out[VX], out[VY], out[SPIN] = cx, cy, vx, vy, s
+    out[Z], out[VZ], out[TIME] = z, vz, t
+    out[STALLED] = 1.0 if (stalled >= MAX_STALLED or loop == MAX_LOOPS - 1) and outcome == RETAINED_TIMEOUT else 0.0
+    return outcome
+
+
+@njit(cache=True)
+def run_all(start, radius, z0, vz0, P, V, out, outcome, tracks):
+    """Every granule in turn; tracks (k, T, 3) for the first k granules."""
+    empty = np.empty((0, 3))
+    for i in range(start.shape[0]):
+        track = tracks[i] if i < tracks.shape[0] else empty
+        outcome[i] = run_one(start[i, 0], start[i, 1], radius[i], z0, vz0, P, V, out[i], track)
