@@ -27,7 +27,7 @@ from typing import Any, Optional
 import numpy as np
 
 FULL_MODEL = "pymunk"
-SEARCH_MODEL = "analytic"
+SEARCH_MODEL = "compiled"  # the full contact laws per granule; matches pymunk within 0.5 pp (docs/fidelity.md)
 FERTILIZER = "compound-10-16-10"
 DEFAULT_TARGET_M = 4.5  # the published settings reach 3.5 m (full model); see docs/agents.md
 DEFAULT_BUDGET = 200

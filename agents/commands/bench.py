@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
 def reference_rows(references, out: Path, say) -> list[dict]:
     """Converged references of the family (resumed from `out`), full and fast model, with tables."""
     rows = []
-    for model in ("pymunk", "analytic"):
+    for model in ("pymunk", "compiled", "analytic"):
         results = references.compute_references(out, model=model, progress=say)
         references.write_table(results, out / f"{model}.md")
         rows += [{"model": model, "scene": r["name"], "cv_percent": r["cv_percent_at_target"],
@@ -82,7 +82,7 @@ def reference_rows(references, out: Path, say) -> list[dict]:
 def target_rows(estimate_bench, out: Path, say) -> list[dict]:
     """The estimate's targets on every reference scene, full and fast model; also as markdown."""
     rows = []
-    for model in ("pymunk", "analytic"):
+    for model in ("pymunk", "compiled", "analytic"):
         rows += estimate_bench.target_rows(out / "references", model=model, progress=say)
     (out / "estimate-targets.md").write_text(estimate_bench.targets_markdown(rows), encoding="utf-8")
     return rows

@@ -45,7 +45,7 @@ def plans(models: tuple[str, ...]) -> list[tuple[str, int, Optional[float]]]:
     return out
 
 
-def speed_accuracy_rows(references_dir: Path, scenes=SCENES, models=("analytic", "pymunk", "spring-damper"),
+def speed_accuracy_rows(references_dir: Path, scenes=SCENES, models=("compiled", "analytic", "pymunk", "spring-damper"),
                         seeds: int = 3, progress: Callable[[str], None] = lambda _: None) -> list[dict]:
     """One row per scene, model, granule count and step: CV RMSE and swath agreement, wall time."""
     references = load_references(references_dir, "pymunk")

@@ -245,10 +245,10 @@ def test_model_that_is_not_a_policy_exits_2(capsys, tmp_path, kind):
 # -- demo --------------------------------------------------------------------------------------
 
 def test_demo_end_to_end(capsys, tmp_path):
-    code, out, err = run_cli(capsys, ["demo", "--budget", "20", "--granules", "300", "--no-policy",
+    code, out, err = run_cli(capsys, ["demo", "--budget", "20", "--granules", "1000", "--no-policy",
                                       "--out", str(tmp_path)])
     assert code == 0, err
-    assert "[1/3]" in err and "analytic" in err and "pymunk" in err
+    assert "[1/3]" in err and "compiled" in err and "pymunk" in err
     data = json.loads((tmp_path / "before_after.json").read_text())
     before, after = data["columns"]
     assert before["rpm"] == pytest.approx(500.0) and before["pitch_deg"] == 0.0

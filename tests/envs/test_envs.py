@@ -21,7 +21,8 @@ from spreadgym.envs.config import DESIGN, TUNING, load_env_config
 from spreadgym.envs.spreader_tuning import bout_features, rebin, single_pass_features
 from spreadgym.errors import ConfigError
 from spreadgym.spread.pattern import Trays
-from spreadgym.physics.selection import MODELS
+from spreadgym.config.scene import load_scene
+from spreadgym.physics.selection import choose_model
 
 DESIGN_ID = "spreadgym/SpinnerDesign-v0"
 TUNING_ID = "spreadgym/SpreaderTuning-v0"
@@ -29,8 +30,9 @@ IDS = [DESIGN_ID, TUNING_ID]
 
 
 def _model() -> str:
-    default = load_env_config(DESIGN).model
-    return default if default in MODELS else "pymunk"
+    """The model the default config runs on (what `auto` resolves to on its scene)."""
+    config = load_env_config(DESIGN)
+    return choose_model(load_scene(config.scene), config.model)[0]
 
 
 MODEL = _model()
@@ -342,7 +344,7 @@ def test_reset_options_fix_the_job():
 def test_yaml_defaults_are_the_documented_ones():
     for name in (DESIGN, TUNING):
         cfg = load_env_config(name)
-        assert cfg.model == "analytic" and cfg.scene == "paper" and cfg.granules == 4096
+        assert cfg.model == "auto" and cfg.scene == "paper" and cfg.granules == 4096
         assert cfg.settings.rpm == (200.0, 1100.0) and cfg.settings.pitch_deg == (-30.0, 30.0)
         assert cfg.context.fertilizers == ["mixture-17-21-17", "compound-10-16-10", "pellet"]
         assert cfg.fallback_restitution.disc == cfg.fallback_restitution.vane == 0.43
@@ -418,7 +420,6 @@ def test_info_is_not_shared_between_calls():
 # -- docs ----------------------------------------------------------------------------
 
 
-@pytest.mark.skipif(MODEL != load_env_config(DESIGN).model, reason="the default spinner model is not available yet")
 def test_the_docs_example_runs():
     from pathlib import Path
 

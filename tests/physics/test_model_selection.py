@@ -8,11 +8,13 @@ from spreadgym.spread.pipeline import run_scene
 from spreadgym.config.scene import load_scene
 
 
-def test_auto_picks_analytic_only_where_it_is_exact_enough():
-    assert choose_model(load_scene("paper"))[0] == "pymunk"  # drop of 50 mm: bounces
-    no_drop = {"feed.drop_height_m": 0.0}
-    assert choose_model(load_scene("paper", no_drop))[0] == "analytic"
-    assert choose_model(load_scene("paper", {**no_drop, "granule.rotation": "locked"}))[0] == "analytic"
+def test_auto_picks_compiled_inside_the_validated_envelope_and_pymunk_outside():
+    assert choose_model(load_scene("paper"))[0] == "compiled"
+    assert choose_model(load_scene("field"))[0] == "compiled"
+    model, reason = choose_model(load_scene("paper", {"spinner.rpm": 1500}))
+    assert model == "pymunk" and "rpm 1500 outside [200, 1100]" in reason
+    model, reason = choose_model(load_scene("paper", {"feed.drop_height_m": 0.2}))
+    assert model == "pymunk" and "drop_height_m 0.2 outside" in reason
     model, reason = choose_model(load_scene("paper"), "pymunk")
     assert (model, reason) == ("pymunk", "requested")
     with pytest.raises(ConfigError, match="model: unknown model 'dem'"):
