@@ -420,9 +420,9 @@ def pattern_grid(results: Sequence[tuple[str, Any]], path: Path, title: str = ""
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).reshape(-1)
     for ax, (label, result) in zip(axes, results):
         transverse_pattern(ax, result, legend=False)
-        cv = result.metrics.get("cv_percent_at_target")
+        cv = result.metrics.cv_percent_at_target
         cv_text = "-" if cv is None else f"{cv:.1f} %"
-        ax.set_title(f"{label}\nCV {cv_text}, swath {result.metrics['effective_swath_m']:g} m", fontsize=8)
+        ax.set_title(f"{label}\nCV {cv_text}, swath {result.metrics.effective_swath_m:g} m", fontsize=8)
         ax.xaxis.label.set_fontsize(7)
         ax.yaxis.label.set_fontsize(7)
         ax.tick_params(labelsize=7)

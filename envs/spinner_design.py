@@ -37,6 +37,7 @@ from spreadgym.config.scene import Scene, load_scene, scene_with
 from spreadgym.errors import ConfigError, MaterialError
 from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.selection import choose_model
+from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.pipeline import SimulationResult, run_scene
 
 SEED_BOUND = 2**31 - 1
@@ -246,12 +247,12 @@ def check_reset_options(options: Any) -> None:
             raise ConfigError(f"options.{key}", f"unknown reset option; known: {', '.join(RESET_OPTIONS)}")
 
 
-def info_metrics(metrics: dict) -> dict:
+def info_metrics(metrics: RunMetrics) -> dict:
     """`simulate --json` metrics as plain Python data, without the wall-clock time.
 
     Arrays become lists (their length varies from run to run, which vector envs cannot
     stack) and the wall time is dropped so that infos are reproducible bit for bit."""
-    return {k: _plain(v) for k, v in metrics.items() if k != "wall_s"}
+    return {k: _plain(v) for k, v in metrics.to_json().items() if k != "wall_s"}
 
 
 def _plain(value: Any) -> Any:

@@ -148,7 +148,7 @@ class SpreaderTuningEnv(gym.Env):
         self._unit = np.clip(self._unit + self.config.max_change * a, -1.0, 1.0)
         self._steps += 1
         result, settings, score = self._tray_test()
-        cv = result.metrics.get("cv_percent_at_target")
+        cv = result.metrics.cv_percent_at_target
         terminated = bool(cv is not None and cv <= self.config.goal_cv_percent)
         truncated = bool(not terminated and self._steps >= self.config.max_steps)
         self._ended = terminated or truncated

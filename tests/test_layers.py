@@ -40,7 +40,7 @@ def test_core_runs_without_gymnasium_installed():
         "from spreadgym.spread.pipeline import run_scene\n"
         "m = run_scene(load_scene('paper', {'sim.granules': 50, 'feed.drop_height_m': 0.0,"
         " 'contact.vane_restitution': 0.0}), ci=False).metrics\n"
-        "assert m['model'] == 'analytic' and 'gymnasium' not in [k for k, v in sys.modules.items() if v]\n"
+        "assert m.model == 'analytic' and 'gymnasium' not in [k for k, v in sys.modules.items() if v]\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr

@@ -282,7 +282,7 @@ def transverse_pattern(ax, result, legend: bool = True) -> None:
     trays = result.trays
     p = result.scene.pattern
     W, w = p.target_swath_m, trays.width_m
-    cv = result.metrics.get("cv_percent_at_target")
+    cv = result.metrics.cv_percent_at_target
     if trays.total_kg <= 0:
         _note(ax, "nothing landed")
         ax.set_xlim(trays.center_m[0] - w, trays.center_m[-1] + w)
@@ -319,15 +319,14 @@ def transverse_pattern(ax, result, legend: bool = True) -> None:
 def cv_vs_bout_width(ax, result) -> None:
     """CV against bout width with the threshold, the effective swath and the target swath."""
     metrics, p = result.metrics, result.scene.pattern
-    curve = metrics.get("cv_curve") or {}
-    widths = np.asarray(curve.get("bout_width_m", []), dtype=float)
-    cvs = np.asarray(curve.get("cv_percent", []), dtype=float)
+    widths = np.asarray(metrics.curve_bout_width_m, dtype=float)
+    cvs = np.asarray(metrics.curve_cv_percent, dtype=float)
     if widths.size == 0 and result.trays.total_kg > 0:
         widths, cvs = pattern.cv_curve(result.trays, p.driving)
-    threshold = float(metrics.get("cv_threshold_percent", p.cv_threshold_percent))
-    target = float(metrics.get("target_swath_m", p.target_swath_m))
-    effective = float(metrics.get("effective_swath_m") or 0.0)
-    cv_target = metrics.get("cv_percent_at_target")
+    threshold = float(metrics.cv_threshold_percent)
+    target = float(metrics.target_swath_m)
+    effective = float(metrics.effective_swath_m or 0.0)
+    cv_target = metrics.cv_percent_at_target
 
     finite = np.isfinite(cvs)
     top = max(2.0 * threshold, 1.1 * float(cvs[finite].max()) if finite.any() else 0.0)
@@ -341,7 +340,7 @@ def cv_vs_bout_width(ax, result) -> None:
     ax.axvline(target, color=TARGET, ls=":", lw=1.6, zorder=2.5, label=f"target swath {target:g} m")
     if cv_target is not None and np.isfinite(cv_target):
         label = f"CV at target {cv_target:.1f} %"
-        ci = metrics.get("cv_ci_percent")
+        ci = metrics.cv_ci_percent
         if ci is not None and len(ci) == 2 and np.all(np.isfinite(ci)):
             lo, hi = float(min(ci)), float(max(ci))
             ax.plot([target, target], [lo, min(hi, top)], color="black", lw=1.4, zorder=3.5,

@@ -20,6 +20,7 @@ from spreadgym.envs import reward as rewards
 from spreadgym.envs.config import DESIGN, TUNING, load_env_config
 from spreadgym.envs.spreader_tuning import bout_features, rebin, single_pass_features
 from spreadgym.errors import ConfigError
+from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.pattern import Trays
 from spreadgym.physics.selection import MODELS
 
@@ -207,8 +208,14 @@ def test_tuning_reward_within_declared_bounds_over_random_actions():
 
 
 def _metrics(cv, effective, released, landed, target=4.0):
-    return {"cv_percent_at_target": cv, "effective_swath_m": effective, "target_swath_m": target,
-            "mass": {"released_kg": released, "landed_kg": landed, "retained_kg": released - landed}}
+    """Run metrics with only what the reward reads: the rest is empty or zero."""
+    return RunMetrics(
+        model="analytic", model_reason="", dt_s=None, granules=0, outcomes={}, departure={},
+        target_swath_m=target, driving="racetrack", tray_width_m=0.5, cv_threshold_percent=15.0,
+        cv_percent_at_target=cv, cv_standard_error_percent=None, cv_raw_percent=cv, cv_ci_percent=None,
+        effective_swath_m=effective, curve_bout_width_m=np.zeros(0), curve_cv_percent=np.zeros(0),
+        trays=Trays(np.zeros(1), np.array([landed]), 0.5), released_kg=released, retained_kg=released - landed,
+    )
 
 
 @pytest.mark.parametrize(

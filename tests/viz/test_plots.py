@@ -132,8 +132,8 @@ def test_nothing_landed_still_draws(result, tmp_path):
         launch=kept,
         landing=dataclasses.replace(result.landing, position_m=np.zeros((0, 2)), time_s=np.zeros(0)),
         trays=pattern.Trays(result.trays.center_m, np.zeros(result.trays.count), result.trays.width_m),
-        metrics={**result.metrics, "cv_percent_at_target": None, "effective_swath_m": 0.0,
-                 "cv_curve": {"bout_width_m": np.zeros(0), "cv_percent": np.zeros(0)}},
+        metrics=dataclasses.replace(result.metrics, cv_percent_at_target=None, effective_swath_m=0.0,
+                                    curve_bout_width_m=np.zeros(0), curve_cv_percent=np.zeros(0)),
     )
     assert len(plots.write_simulation_plots(empty, tmp_path)) == 4
     assert plots.render_rgb(empty).shape == (400, 600, 3)
