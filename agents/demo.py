@@ -25,8 +25,16 @@ from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
+from spreadgym.agents.baselines import cmaes_search
+from spreadgym.agents.evaluation import DESIGN_ENV, EvalContext, make_env, published_action, write_csv
+from spreadgym.agents.training import load_policy
+from tqdm import tqdm
 
+from spreadgym.config.scene import load_scene, scene_with
+from spreadgym.errors import SpreadgymError
+from spreadgym.report import format_table, print_json
 from spreadgym.spread.metrics import RunMetrics
+from spreadgym.spread.pipeline import run_scene
 
 FULL_MODEL = "pymunk"
 SEARCH_MODEL = "analytic"
@@ -85,10 +93,6 @@ def _say(text: str) -> None:
 
 def _full_run(scene, label: str):
     """One run of the full model with a progress bar of the simulated spinner time."""
-    from tqdm import tqdm
-
-    from spreadgym.spread.pipeline import run_scene
-
     started = time.perf_counter()
     with tqdm(desc=label, unit="ms", file=sys.stderr, disable=None, leave=False,
               bar_format="{desc}: {n:.0f} ms of spinner time simulated [{elapsed}]") as bar:
@@ -104,13 +108,6 @@ def _full_run(scene, label: str):
 def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAULT_BUDGET,
              granules: int = DEFAULT_GRANULES, seed: int = 0, policy_path: Optional[Path] = POLICY_PATH,
              policy_required: bool = False) -> dict:
-    from spreadgym.agents.baselines import cmaes_search
-    from spreadgym.agents.evaluation import DESIGN_ENV, EvalContext, make_env, published_action
-    from tqdm import tqdm
-
-    from spreadgym.config.scene import load_scene, scene_with
-    from spreadgym.errors import SpreadgymError
-
     started = time.perf_counter()
     if budget < 1:
         raise SpreadgymError(f"--budget must be at least 1 simulation, got {budget}")
@@ -190,12 +187,6 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
 
 
 def _policy_column(path: Path, ctx, base, granules: int, steps: int, required: bool) -> Optional[Column]:
-    from spreadgym.agents.evaluation import make_env
-    from spreadgym.agents.training import load_policy
-
-    from spreadgym.config.scene import scene_with
-    from spreadgym.errors import SpreadgymError
-
     try:
         policy = load_policy(path)
         kwargs = {k: v for k, v in policy.env_kwargs.items() if k != "granules"}
@@ -252,10 +243,7 @@ def table_rows(columns: list[Column], target_m: float) -> list[tuple]:
 
 
 def write_demo(out: Path, columns: list[Column], target_m: float, budget: int, granules: int, wall: float) -> list:
-    from spreadgym.agents.evaluation import write_csv
-
-    from spreadgym.report import format_table, print_json
-    from spreadgym.viz.plots import write_simulation_plots
+    from spreadgym.viz.plots import write_simulation_plots  # matplotlib: only when writing pictures
 
     out.mkdir(parents=True, exist_ok=True)
     header = ("quantity", *[c.title for c in columns])
@@ -285,6 +273,7 @@ def write_demo(out: Path, columns: list[Column], target_m: float, budget: int, g
 
 def side_by_side(path: Path, columns: list[Column], target_m: float) -> Path:
     """Pattern (top) and CV against bout width (bottom), one column per setting."""
+    # matplotlib (and viz.plots, which imports it) only when a picture is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

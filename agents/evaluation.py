@@ -29,8 +29,11 @@ from typing import Any, Callable, Iterable, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
+from spreadgym.envs.common.actions import Settings
+from spreadgym.envs.common.task import Context
 
 from spreadgym.errors import SpreadgymError
+from spreadgym.report import format_table
 
 DESIGN_ENV = "spreadgym:SpinnerDesign-v0"
 TUNING_ENV = "spreadgym:SpreaderTuning-v0"
@@ -345,8 +348,6 @@ def markdown_table(records: Sequence[dict], columns: Sequence[tuple[str, str]]) 
 
 
 def text_table(records: Sequence[dict], columns: Sequence[tuple[str, str]]) -> str:
-    from spreadgym.report import format_table
-
     rows = [[_cell(rec.get(key)) for key, _ in columns] for rec in records]
     return format_table(rows, [title for _, title in columns])
 
@@ -393,9 +394,6 @@ def flat_row(row: Row) -> dict:
 
 def simulate_row(env, row: Row):
     """Re-run a scored row (same job, settings and granule sample) for its pictures."""
-    from spreadgym.envs.actions import Settings
-    from spreadgym.envs.spinner_design import Context
-
     task = env.unwrapped.task
     c, s = row.context, row.settings
     context = Context(c["fertilizer"], c["spinner_material"], float(c["target_swath_m"]),
@@ -407,6 +405,7 @@ def simulate_row(env, row: Row):
 
 def pattern_grid(results: Sequence[tuple[str, Any]], path: Path, title: str = "") -> Path:
     """Transverse patterns of several runs in one picture (one panel each)."""
+    # matplotlib (and viz.plots, which imports it) only when a picture is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

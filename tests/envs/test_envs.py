@@ -13,16 +13,16 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from gymnasium.utils.env_checker import data_equivalence
+from spreadgym.envs.common import reward as rewards
+from spreadgym.envs.common.config import DESIGN, TUNING, load_env_config
+from spreadgym.envs.spreader_tuning import bout_features, rebin, single_pass_features
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import spreadgym  # noqa: F401  (registers the envs)
-from spreadgym.envs import reward as rewards
-from spreadgym.envs.config import DESIGN, TUNING, load_env_config
-from spreadgym.envs.spreader_tuning import bout_features, rebin, single_pass_features
 from spreadgym.errors import ConfigError
+from spreadgym.physics.selection import MODELS
 from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.pattern import Trays
-from spreadgym.physics.selection import MODELS
 
 DESIGN_ID = "spreadgym/SpinnerDesign-v0"
 TUNING_ID = "spreadgym/SpreaderTuning-v0"

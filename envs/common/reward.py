@@ -22,7 +22,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-from spreadgym.envs.config import RewardConfig, TuningRewardConfig
+from spreadgym.envs.common.config import RewardConfig, TuningRewardConfig
+
 from spreadgym.spread.metrics import RunMetrics
 
 
