@@ -140,10 +140,6 @@ def published_action(env) -> np.ndarray:
     return task.settings_map.to_unit(task.settings_map.from_scene(task.base_scene))
 
 
-def action_names(env) -> list[str]:
-    return list(env.unwrapped.task.settings_map.names)
-
-
 # -- rows ---------------------------------------------------------------------------------
 
 @dataclass

@@ -381,37 +381,3 @@ def write_simulation_plots(result, out_dir) -> list[Path]:
         fig.savefig(path, dpi=DPI)
         written.append(path)
     return written
-
-
-def _shrink(ax, title=8.5, label=7.5, ticks=7.0) -> None:
-    ax.title.set_fontsize(title)
-    ax.xaxis.label.set_fontsize(label)
-    ax.yaxis.label.set_fontsize(label)
-    ax.tick_params(labelsize=ticks)
-    for text in ax.texts:
-        text.set_fontsize(ticks)
-    leg = ax.get_legend()
-    if leg is not None:
-        for text in leg.get_texts():
-            text.set_fontsize(ticks)
-
-
-def render_rgb(result, width_px: int = 600, height_px: int = 400) -> np.ndarray:
-    """Plan view (left) and transverse pattern (right) as a uint8 (height, width, 3) image."""
-    fig = _new_figure(figsize=(width_px / DPI, height_px / DPI), dpi=DPI)
-    left, right = fig.subplots(1, 2, width_ratios=[1.0, 1.1])
-    plan_view(left, result, max_tracks=15, max_rays=50, legend=False)
-    transverse_pattern(right, result, legend=False)
-    for ax in (left, right):
-        _shrink(ax)
-    if right.get_legend_handles_labels()[0]:
-        right.legend(loc="upper center", ncol=3, fontsize=6.5, handlelength=1.2, columnspacing=0.8,
-                     borderpad=0.3, handletextpad=0.4, framealpha=0.9)
-    left.title.set_text(left.get_title().replace("Plan view: ", ""))
-    right.title.set_text(right.get_title().replace("Transverse pattern: ", ""))
-    fig.canvas.draw()
-    rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
-    image = np.full((height_px, width_px, 3), 255, dtype=np.uint8)
-    h, w = min(height_px, rgb.shape[0]), min(width_px, rgb.shape[1])
-    image[:h, :w] = rgb[:h, :w]
-    return image

@@ -63,16 +63,6 @@ def test_write_simulation_plots(result, tmp_path):
         assert path.stat().st_size > 10_000, path.name  # something was drawn
 
 
-def test_render_rgb(result):
-    image = plots.render_rgb(result)
-    assert image.shape == (400, 600, 3)
-    assert image.dtype == np.uint8
-    assert image.std() > 10.0
-    assert np.unique(image.reshape(-1, 3), axis=0).shape[0] > 50
-    odd = plots.render_rgb(result, width_px=333, height_px=211)
-    assert odd.shape == (211, 333, 3) and odd.dtype == np.uint8
-
-
 def test_plan_view_draws_deflectors_and_bounced_rays(deflected):
     fig, ax = _axes()
     plots.plan_view(ax, deflected)
@@ -136,7 +126,6 @@ def test_nothing_landed_still_draws(result, tmp_path):
                                     curve_bout_width_m=np.zeros(0), curve_cv_percent=np.zeros(0)),
     )
     assert len(plots.write_simulation_plots(empty, tmp_path)) == 4
-    assert plots.render_rgb(empty).shape == (400, 600, 3)
 
 
 def test_no_pyplot_global_state():
