@@ -25,6 +25,16 @@ from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
+from spreadgym.agents.baselines import cmaes_search
+from spreadgym.agents.evaluation import DESIGN_ENV, EvalContext, make_env, published_action, write_csv
+from spreadgym.agents.training import load_policy
+from tqdm import tqdm
+
+from spreadgym.config.scene import load_scene, scene_with
+from spreadgym.errors import SpreadgymError
+from spreadgym.report import format_table, print_json
+from spreadgym.spread.metrics import RunMetrics
+from spreadgym.spread.pipeline import run_scene
 
 FULL_MODEL = "pymunk"
 SEARCH_MODEL = "compiled"  # the full contact laws per granule; matches pymunk within 0.5 pp (docs/fidelity.md)
@@ -45,10 +55,14 @@ class Column:
     pitch_deg: float
     how: str  # how the settings were found
     search_simulations: int = 0
-    full: dict = field(default_factory=dict)  # metrics of the full model
-    fast: dict = field(default_factory=dict)  # metrics of the analytic model (search sample)
+    fast: dict = field(default_factory=dict)  # info["metrics"] of the analytic model (search sample)
     full_wall_s: float = 0.0
     result: Any = None  # SimulationResult of the full model (for pictures)
+
+    @property
+    def full(self) -> RunMetrics:
+        """Metrics of the full model."""
+        return self.result.metrics
 
     def record(self) -> dict:
         return {
@@ -56,11 +70,11 @@ class Column:
             "how": self.how,
             "rpm": self.rpm,
             "pitch_deg": self.pitch_deg,
-            "cv_percent_at_target": self.full.get("cv_percent_at_target"),
-            "effective_swath_m": self.full.get("effective_swath_m"),
+            "cv_percent_at_target": self.full.cv_percent_at_target,
+            "effective_swath_m": self.full.effective_swath_m,
             "landed_percent": _landed_percent(self.full),
-            "model": self.full.get("model"),
-            "granules": self.full.get("granules"),
+            "model": self.full.model,
+            "granules": self.full.granules,
             "full_model_wall_s": self.full_wall_s,
             "analytic_cv_percent_at_target": self.fast.get("cv_percent_at_target"),
             "analytic_effective_swath_m": self.fast.get("effective_swath_m"),
@@ -68,10 +82,9 @@ class Column:
         }
 
 
-def _landed_percent(metrics: dict) -> Optional[float]:
-    mass = metrics.get("mass") or {}
-    released = mass.get("released_kg") or 0.0
-    return 100.0 * mass.get("landed_kg", 0.0) / released if released else None
+def _landed_percent(metrics: RunMetrics) -> Optional[float]:
+    fraction = metrics.landed_fraction
+    return None if fraction is None else 100.0 * fraction
 
 
 def _say(text: str) -> None:
@@ -80,10 +93,6 @@ def _say(text: str) -> None:
 
 def _full_run(scene, label: str):
     """One run of the full model with a progress bar of the simulated spinner time."""
-    from tqdm import tqdm
-
-    from spreadgym.spread.pipeline import run_scene
-
     started = time.perf_counter()
     with tqdm(desc=label, unit="ms", file=sys.stderr, disable=None, leave=False,
               bar_format="{desc}: {n:.0f} ms of spinner time simulated [{elapsed}]") as bar:
@@ -99,13 +108,6 @@ def _full_run(scene, label: str):
 def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAULT_BUDGET,
              granules: int = DEFAULT_GRANULES, seed: int = 0, policy_path: Optional[Path] = POLICY_PATH,
              policy_required: bool = False) -> dict:
-    from spreadgym.agents.baselines import cmaes_search
-    from spreadgym.agents.evaluation import DESIGN_ENV, EvalContext, make_env, published_action
-    from tqdm import tqdm
-
-    from spreadgym.config.scene import load_scene, scene_with
-    from spreadgym.errors import SpreadgymError
-
     started = time.perf_counter()
     if budget < 1:
         raise SpreadgymError(f"--budget must be at least 1 simulation, got {budget}")
@@ -125,13 +127,12 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
     published = Column("published", "published (paper)", float(base.spinner.rpm), 0.0,
                        "the paper's settings")
     published.result, published.full_wall_s = _full_run(base, "full model, published")
-    published.full = published.result.metrics
     env.reset(seed=ctx.search_seed, options=ctx.options())
     x_pub = published_action(env)
     _, _, _, _, info = env.step(x_pub)
     published.fast = info["metrics"]
-    _say(f"      CV {published.full['cv_percent_at_target']:.1f} % at {target_m:g} m, "
-         f"effective swath {published.full['effective_swath_m']:g} m ({published.full_wall_s:.1f} s)")
+    _say(f"      CV {published.full.cv_percent_at_target:.1f} % at {target_m:g} m, "
+         f"effective swath {published.full.effective_swath_m:g} m ({published.full_wall_s:.1f} s)")
 
     # 2. CMA-ES on the analytic model
     _say(f"[2/{steps}] CMA-ES over rpm and vane pitch on the fast {SEARCH_MODEL} model, {budget} simulations "
@@ -167,9 +168,8 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
     _say(f"[3/{steps}] the best settings with the full model ({FULL_MODEL})")
     after_scene = scene_with(base, smap.scene_overrides(best))
     after.result, after.full_wall_s = _full_run(after_scene, "full model, CMA-ES best")
-    after.full = after.result.metrics
-    _say(f"      CV {after.full['cv_percent_at_target']:.1f} % at {target_m:g} m, "
-         f"effective swath {after.full['effective_swath_m']:g} m ({after.full_wall_s:.1f} s)")
+    _say(f"      CV {after.full.cv_percent_at_target:.1f} % at {target_m:g} m, "
+         f"effective swath {after.full.effective_swath_m:g} m ({after.full_wall_s:.1f} s)")
     columns = [published, after]
 
     # 4. optional: a trained policy
@@ -187,12 +187,6 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
 
 
 def _policy_column(path: Path, ctx, base, granules: int, steps: int, required: bool) -> Optional[Column]:
-    from spreadgym.agents.evaluation import make_env
-    from spreadgym.agents.training import load_policy
-
-    from spreadgym.config.scene import scene_with
-    from spreadgym.errors import SpreadgymError
-
     try:
         policy = load_policy(path)
         kwargs = {k: v for k, v in policy.env_kwargs.items() if k != "granules"}
@@ -218,9 +212,8 @@ def _policy_column(path: Path, ctx, base, granules: int, steps: int, required: b
     column.fast = info["metrics"]
     column.result, column.full_wall_s = _full_run(scene_with(base, env.unwrapped.task.settings_map.scene_overrides(
         settings)), "full model, policy")
-    column.full = column.result.metrics
-    _say(f"      CV {column.full['cv_percent_at_target']:.1f} % at {ctx.target_swath_m:g} m, "
-         f"effective swath {column.full['effective_swath_m']:g} m ({column.full_wall_s:.1f} s)")
+    _say(f"      CV {column.full.cv_percent_at_target:.1f} % at {ctx.target_swath_m:g} m, "
+         f"effective swath {column.full.effective_swath_m:g} m ({column.full_wall_s:.1f} s)")
     return column
 
 
@@ -236,10 +229,10 @@ def table_rows(columns: list[Column], target_m: float) -> list[tuple]:
     rows = [
         ("rpm", *[_fmt(c.rpm, ".0f") for c in columns]),
         ("vane pitch (deg, + = tip forward)", *[_fmt(c.pitch_deg, "+.1f") for c in columns]),
-        (f"CV at target {target_m:g} m (%)", *[_fmt(c.full.get("cv_percent_at_target"), ".1f") for c in columns]),
-        ("effective swath, CV <= 15 % (m)", *[_fmt(c.full.get("effective_swath_m"), "g") for c in columns]),
+        (f"CV at target {target_m:g} m (%)", *[_fmt(c.full.cv_percent_at_target, ".1f") for c in columns]),
+        ("effective swath, CV <= 15 % (m)", *[_fmt(c.full.effective_swath_m, "g") for c in columns]),
         ("landed (%)", *[_fmt(_landed_percent(c.full), ".1f") for c in columns]),
-        ("model", *[f"{c.full.get('model')} (full)" for c in columns]),
+        ("model", *[f"{c.full.model} (full)" for c in columns]),
         (f"CV at target, {SEARCH_MODEL} model (%)",
          *[_fmt(c.fast.get("cv_percent_at_target"), ".1f") for c in columns]),
         (f"effective swath, {SEARCH_MODEL} model (m)", *[_fmt(c.fast.get("effective_swath_m"), "g") for c in columns]),
@@ -250,10 +243,7 @@ def table_rows(columns: list[Column], target_m: float) -> list[tuple]:
 
 
 def write_demo(out: Path, columns: list[Column], target_m: float, budget: int, granules: int, wall: float) -> list:
-    from spreadgym.agents.evaluation import write_csv
-
-    from spreadgym.report import format_table, print_json
-    from spreadgym.viz.plots import write_simulation_plots
+    from spreadgym.viz.plots import write_simulation_plots  # matplotlib: only when writing pictures
 
     out.mkdir(parents=True, exist_ok=True)
     header = ("quantity", *[c.title for c in columns])
@@ -283,6 +273,7 @@ def write_demo(out: Path, columns: list[Column], target_m: float, budget: int, g
 
 def side_by_side(path: Path, columns: list[Column], target_m: float) -> Path:
     """Pattern (top) and CV against bout width (bottom), one column per setting."""
+    # matplotlib (and viz.plots, which imports it) only when a picture is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -295,10 +286,10 @@ def side_by_side(path: Path, columns: list[Column], target_m: float) -> Path:
     for j, c in enumerate(columns):
         transverse_pattern(axes[0, j], c.result)
         cv_vs_bout_width(axes[1, j], c.result)
-        cv = c.full.get("cv_percent_at_target")
+        cv = c.full.cv_percent_at_target
         axes[0, j].set_title(f"{c.title}: {c.rpm:.0f} rpm, pitch {c.pitch_deg:+.1f} deg\n"
                              f"CV {_fmt(cv, '.1f')} % at {target_m:g} m, effective swath "
-                             f"{c.full.get('effective_swath_m'):g} m ({c.full.get('model')})", fontsize=10)
+                             f"{c.full.effective_swath_m:g} m ({c.full.model})", fontsize=10)
         for ax in axes[:, j]:
             ax.title.set_fontsize(10)
     top = max(ax.get_ylim()[1] for ax in axes[0])

@@ -29,8 +29,11 @@ from typing import Any, Callable, Iterable, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
+from spreadgym.envs.common.actions import Settings
+from spreadgym.envs.common.task import Context
 
 from spreadgym.errors import SpreadgymError
+from spreadgym.report import format_table
 
 DESIGN_ENV = "spreadgym:SpinnerDesign-v0"
 TUNING_ENV = "spreadgym:SpreaderTuning-v0"
@@ -135,10 +138,6 @@ def published_action(env) -> np.ndarray:
     """The scene's own settings (the paper: 500 rpm, radial vanes) as a unit action."""
     task = env.unwrapped.task
     return task.settings_map.to_unit(task.settings_map.from_scene(task.base_scene))
-
-
-def action_names(env) -> list[str]:
-    return list(env.unwrapped.task.settings_map.names)
 
 
 # -- rows ---------------------------------------------------------------------------------
@@ -345,8 +344,6 @@ def markdown_table(records: Sequence[dict], columns: Sequence[tuple[str, str]]) 
 
 
 def text_table(records: Sequence[dict], columns: Sequence[tuple[str, str]]) -> str:
-    from spreadgym.report import format_table
-
     rows = [[_cell(rec.get(key)) for key, _ in columns] for rec in records]
     return format_table(rows, [title for _, title in columns])
 
@@ -393,9 +390,6 @@ def flat_row(row: Row) -> dict:
 
 def simulate_row(env, row: Row):
     """Re-run a scored row (same job, settings and granule sample) for its pictures."""
-    from spreadgym.envs.actions import Settings
-    from spreadgym.envs.spinner_design import Context
-
     task = env.unwrapped.task
     c, s = row.context, row.settings
     context = Context(c["fertilizer"], c["spinner_material"], float(c["target_swath_m"]),
@@ -407,6 +401,7 @@ def simulate_row(env, row: Row):
 
 def pattern_grid(results: Sequence[tuple[str, Any]], path: Path, title: str = "") -> Path:
     """Transverse patterns of several runs in one picture (one panel each)."""
+    # matplotlib (and viz.plots, which imports it) only when a picture is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -420,9 +415,9 @@ def pattern_grid(results: Sequence[tuple[str, Any]], path: Path, title: str = ""
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).reshape(-1)
     for ax, (label, result) in zip(axes, results):
         transverse_pattern(ax, result, legend=False)
-        cv = result.metrics.get("cv_percent_at_target")
+        cv = result.metrics.cv_percent_at_target
         cv_text = "-" if cv is None else f"{cv:.1f} %"
-        ax.set_title(f"{label}\nCV {cv_text}, swath {result.metrics['effective_swath_m']:g} m", fontsize=8)
+        ax.set_title(f"{label}\nCV {cv_text}, swath {result.metrics.effective_swath_m:g} m", fontsize=8)
         ax.xaxis.label.set_fontsize(7)
         ax.yaxis.label.set_fontsize(7)
         ax.tick_params(labelsize=7)

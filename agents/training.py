@@ -1,25 +1,7 @@
 """Training with stable-baselines3 (PPO or SAC) on the spreadgym envs, with resume.
 
-Config: one YAML per algorithm (`configs/agents/ppo.yaml`, `configs/agents/sac.yaml`),
-flat like rl-baselines3-zoo's: the run keys below plus the algorithm's own keyword
-arguments (`learning_rate`, `n_steps`, `batch_size`, ...). A key that is neither a
-run key nor a keyword of the algorithm is an error naming it.
-
-Run keys:
-    algo             ppo | sac (optional; must match --algo)
-    env              env id (spreadgym:SpinnerDesign-v0 or spreadgym:SpreaderTuning-v0)
-    env_kwargs       gym.make keyword arguments (checked by the env: unknown keys fail)
-    n_envs           parallel envs: SubprocVecEnv when > 1, DummyVecEnv when 1
-    n_timesteps      total env steps of the run
-    normalize        false | true | {norm_obs, norm_reward, clip_obs, clip_reward, gamma}
-    seed             seed of the model and the envs
-    checkpoint_freq  env steps between checkpoints
-    max_minutes      wall-clock limit of one invocation (null: none)
-    policy           MlpPolicy
-    policy_kwargs    e.g. {net_arch: [64, 64], activation_fn: tanh, log_std_init: -1.0}
-
-Learning rates (and PPO's clip_range) may be a number or `lin_<value>` (linear decay
-to 0, as in the zoo).
+Config: see `spreadgym.agents.run_config` (one YAML per algorithm, run keys plus the
+algorithm's keyword arguments).
 
 Output folder DIR:
     DIR/config.yaml               the config the run used (+ a `trained:` record)
@@ -36,213 +18,49 @@ saved config. Ctrl-C (or SIGTERM) stops at the next env step and saves a checkpo
 
 from __future__ import annotations
 
-import copy
-import difflib
-import inspect
+import multiprocessing
 import os
 import pickle
 import re
 import signal
 import sys
 import time
+import zipfile
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Optional
 
+import gymnasium as gym
+import numpy as np
 import yaml
+from spreadgym.agents.run_config import (
+    ALGOS,
+    RunConfig,
+    algo_class,
+    default_config_path,
+    model_kwargs,
+    read_config,
+    run_config_schema,
+    validate_config,
+)
+from tqdm import tqdm
 
+from spreadgym.config.overrides import apply_overrides
 from spreadgym.errors import ConfigError, SpreadgymError
 
-ALGOS = ("ppo", "sac")
-RUN_KEYS = ("algo", "env", "env_kwargs", "n_envs", "n_timesteps", "normalize", "seed", "checkpoint_freq",
-            "max_minutes", "policy", "policy_kwargs")
-WRITTEN_KEYS = ("trained",)  # written into DIR/config.yaml by train, ignored when read back
-RESERVED = {"policy", "env", "tensorboard_log", "verbose", "seed", "device", "_init_setup_model", "policy_kwargs"}
-NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
-ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu", "silu")
+# stable-baselines3 and torch are imported inside the functions that need them: torch
+# must be imported after OMP_NUM_THREADS is set, and a module importing this one (the
+# demo, the commands) should not pay for torch unless it trains or loads a policy.
+
 CHECKPOINT_PREFIX = "rl_model"
 CHECKPOINT_RE = re.compile(rf"^{CHECKPOINT_PREFIX}_(\d+)_steps\.zip$")
-SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
-
-
-def algo_class(algo: str):
-    if algo not in ALGOS:
-        raise SpreadgymError(f"unknown algorithm {algo!r}; known: {', '.join(ALGOS)}")
-    from stable_baselines3 import PPO, SAC
-
-    return {"ppo": PPO, "sac": SAC}[algo]
-
-
-def hyperparameter_names(algo: str) -> list[str]:
-    params = inspect.signature(algo_class(algo).__init__).parameters
-    return sorted(k for k in params if k != "self" and k not in RESERVED)
-
-
-# -- config ---------------------------------------------------------------------------------
-
-def default_config_path(algo: str) -> Path:
-    from spreadgym.config.resources import config_dir
-
-    return config_dir() / "agents" / f"{algo}.yaml"
-
-
-def read_config(path: Path) -> dict:
-    from spreadgym.config.resources import read_yaml
-
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError("--config", f"no such file {str(path)!r}")
-    raw = read_yaml(path)
-    if raw is None:
-        raw = {}
-    if not isinstance(raw, dict):
-        raise ConfigError(str(path), f"expected a mapping of keys, got {type(raw).__name__}")
-    return raw
-
-
-def set_dotted(config: dict, assignments: dict[str, Any]) -> dict:
-    """Set dotted keys (`--set learning_rate=1e-3`, `--set env_kwargs.granules=500`).
-
-    New keys may be created (they are validated afterwards like the YAML's)."""
-    out = copy.deepcopy(config)
-    for dotted, value in assignments.items():
-        parts = dotted.split(".")
-        node = out
-        for part in parts[:-1]:
-            if node.get(part) is None or node.get(part) is False or node.get(part) is True:
-                node[part] = {}
-            if not isinstance(node[part], dict):
-                raise ConfigError(dotted, f"{part} is not a mapping")
-            node = node[part]
-        node[parts[-1]] = value
-    return out
-
-
-def _unknown(key: str, known: list[str], where: str) -> ConfigError:
-    close = difflib.get_close_matches(key, known, n=1)
-    hint = f" (did you mean {close[0]}?)" if close else ""
-    return ConfigError(key, f"unknown key in {where}{hint}; known keys: {', '.join(known)}")
-
-
-def validate_config(algo: str, raw: dict, where: str) -> dict:
-    """Check the keys and the run values; returns {run keys..., "hyperparams": {...}}."""
-    from spreadgym.agents.evaluation import canonical_env_id
-
-    hyper_names = hyperparameter_names(algo)
-    known = sorted(set(RUN_KEYS) | set(hyper_names))
-    cfg: dict[str, Any] = {"hyperparams": {}}
-    for key, value in raw.items():
-        if key in WRITTEN_KEYS:
-            continue
-        if key in RUN_KEYS:
-            cfg[key] = value
-        elif key in hyper_names:
-            cfg["hyperparams"][key] = value
-        else:
-            raise _unknown(str(key), known, where)
-    if cfg.get("algo") not in (None, algo):
-        raise ConfigError("algo", f"{where} is a config for {cfg['algo']!r}, not for {algo!r}")
-    cfg["algo"] = algo
-    cfg["env"] = canonical_env_id(str(cfg.get("env") or "spreadgym:SpinnerDesign-v0"))
-    env_kwargs = cfg.get("env_kwargs") or {}
-    if not isinstance(env_kwargs, dict):
-        raise ConfigError("env_kwargs", f"expected a mapping, got {env_kwargs!r}")
-    cfg["env_kwargs"] = env_kwargs
-    cfg["n_envs"] = _positive_int(cfg.get("n_envs", 1), "n_envs")
-    cfg["n_timesteps"] = _positive_int(cfg.get("n_timesteps", 10_000), "n_timesteps")
-    cfg["checkpoint_freq"] = _positive_int(cfg.get("checkpoint_freq", 1000), "checkpoint_freq")
-    cfg["seed"] = int(cfg.get("seed") or 0)
-    minutes = cfg.get("max_minutes")
-    if minutes is not None and not (isinstance(minutes, (int, float)) and minutes > 0):
-        raise ConfigError("max_minutes", f"expected a positive number of minutes or null, got {minutes!r}")
-    cfg["max_minutes"] = minutes
-    cfg["policy"] = str(cfg.get("policy") or "MlpPolicy")
-    cfg["normalize"] = _normalize_kwargs(cfg.get("normalize", False))
-    policy_kwargs = cfg.get("policy_kwargs") or {}
-    if not isinstance(policy_kwargs, dict):
-        raise ConfigError("policy_kwargs", f"expected a mapping, got {policy_kwargs!r}")
-    act = policy_kwargs.get("activation_fn")
-    if act is not None and act not in ACTIVATIONS:
-        raise ConfigError("policy_kwargs.activation_fn", f"unknown {act!r}; known: {', '.join(ACTIVATIONS)}")
-    cfg["policy_kwargs"] = policy_kwargs
-    for key in SCHEDULE_KEYS:
-        if key in cfg["hyperparams"]:
-            _schedule(cfg["hyperparams"][key], key)  # validates
-    return cfg
-
-
-def _positive_int(value: Any, key: str) -> int:
-    try:
-        number = int(value)
-    except (TypeError, ValueError):
-        raise ConfigError(key, f"expected a positive whole number, got {value!r}") from None
-    if number < 1 or number != float(value):
-        raise ConfigError(key, f"expected a positive whole number, got {value!r}")
-    return number
-
-
-def _normalize_kwargs(value: Any) -> Optional[dict]:
-    """None (no VecNormalize) or VecNormalize keyword arguments."""
-    if value is None or value is False:
-        return None
-    if value is True:
-        return {}
-    if isinstance(value, dict):
-        for key in value:
-            if key not in NORMALIZE_KEYS:
-                raise _unknown(f"normalize.{key}", [f"normalize.{k}" for k in NORMALIZE_KEYS], "normalize")
-        return dict(value)
-    raise ConfigError("normalize", f"expected true, false or a mapping, got {value!r}")
-
-
-def _schedule(value: Any, key: str):
-    """A number, or 'lin_<number>': linear from <number> to 0 over the run."""
-    if isinstance(value, str):
-        match = re.fullmatch(r"lin_([0-9.eE+-]+)", value.strip())
-        if not match:
-            raise ConfigError(key, f"expected a number or lin_<number>, got {value!r}")
-        start = float(match.group(1))
-        return lambda progress_remaining: progress_remaining * start
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(key, f"expected a number or lin_<number>, got {value!r}")
-    return float(value)
-
-
-def as_yaml_config(cfg: dict) -> dict:
-    """The flat YAML form of a validated config (what DIR/config.yaml holds)."""
-    out = {key: cfg[key] for key in RUN_KEYS if key in cfg}
-    out["normalize"] = False if cfg["normalize"] is None else (cfg["normalize"] or True)
-    out.update(cfg["hyperparams"])
-    return out
-
-
-def model_kwargs(cfg: dict) -> dict:
-    """Keyword arguments of the SB3 constructor from a validated config."""
-    import torch
-
-    kwargs = dict(cfg["hyperparams"])
-    for key in SCHEDULE_KEYS:
-        if key in kwargs:
-            kwargs[key] = _schedule(kwargs[key], key)
-    policy_kwargs = dict(cfg["policy_kwargs"])
-    if "activation_fn" in policy_kwargs:
-        policy_kwargs["activation_fn"] = {
-            "tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU, "leaky_relu": torch.nn.LeakyReLU,
-            "gelu": torch.nn.GELU, "silu": torch.nn.SiLU,
-        }[policy_kwargs["activation_fn"]]
-    if policy_kwargs:
-        kwargs["policy_kwargs"] = policy_kwargs
-    return kwargs
 
 
 # -- envs -----------------------------------------------------------------------------------
 
 def worker_env(env_id: str, **env_kwargs):
     """Make one env; in a worker process, leave Ctrl-C and SIGTERM to the trainer."""
-    import multiprocessing
-
-    import gymnasium as gym
-
     if multiprocessing.parent_process() is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -251,24 +69,20 @@ def worker_env(env_id: str, **env_kwargs):
 
 def check_env_kwargs(env_id: str, env_kwargs: dict):
     """Build the env once in this process, so a bad kwarg fails here, naming the key."""
-    import gymnasium as gym
-
     env = gym.make(env_id, **env_kwargs)
     spaces = (env.observation_space, env.action_space)
     env.close()
     return spaces
 
 
-def make_training_env(cfg: dict):
-    from functools import partial
-
+def make_training_env(cfg: RunConfig):
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    n = cfg["n_envs"]
+    n = cfg.n_envs
     vec_cls = SubprocVecEnv if n > 1 else DummyVecEnv
-    return make_vec_env(partial(worker_env, cfg["env"]), n_envs=n, seed=cfg["seed"],
-                        env_kwargs=cfg["env_kwargs"], vec_env_cls=vec_cls)
+    return make_vec_env(partial(worker_env, cfg.env), n_envs=n, seed=cfg.seed,
+                        env_kwargs=cfg.env_kwargs, vec_env_cls=vec_cls)
 
 
 # -- checkpoints ----------------------------------------------------------------------------
@@ -314,7 +128,6 @@ def save_checkpoint(model, ckpt_dir: Path) -> Checkpoint:
 
 def _callbacks(total: int, started_steps: int, stop_flags: dict, max_minutes: Optional[float]):
     from stable_baselines3.common.callbacks import BaseCallback
-    from tqdm import tqdm
 
     class Progress(BaseCallback):
         """tqdm bar over env steps (SB3's own bar needs rich); a log line every minute
@@ -367,7 +180,7 @@ class TrainResult:
     wall_s: float
 
 
-def load_run_config(out_dir: Path, algo: str) -> dict:
+def load_run_config(out_dir: Path, algo: str) -> RunConfig:
     path = out_dir / "config.yaml"
     if not path.is_file():
         raise SpreadgymError(f"{out_dir}/checkpoints holds checkpoints but {path} is missing: cannot resume "
@@ -399,33 +212,35 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
         path = Path(config_path) if config_path else default_config_path(algo)
         raw = read_config(path)
         if overrides:
-            raw = set_dotted(raw, overrides)
+            raw = apply_overrides(raw, overrides, run_config_schema(algo))
         if env_id:
             raw["env"] = env_id
         if seed is not None:
             raw["seed"] = int(seed)
         cfg = validate_config(algo, raw, str(config_path or f"configs/agents/{algo}.yaml"))
     if timesteps is not None:
-        cfg["n_timesteps"] = _positive_int(timesteps, "--timesteps")
+        if isinstance(timesteps, bool) or not isinstance(timesteps, int) or timesteps < 1:
+            raise ConfigError("--timesteps", f"expected a positive whole number, got {timesteps!r}")
+        cfg = cfg.replace(n_timesteps=timesteps)
     if max_minutes is not None:
         if not max_minutes > 0:
             raise SpreadgymError(f"--max-minutes must be positive, got {max_minutes}")
-        cfg["max_minutes"] = float(max_minutes)
+        cfg = cfg.replace(max_minutes=float(max_minutes))
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("MKL_NUM_THREADS", "1")
     import torch
 
     torch.set_num_threads(1)
-    spaces = check_env_kwargs(cfg["env"], cfg["env_kwargs"])  # bad env kwargs fail here, naming the key
+    spaces = check_env_kwargs(cfg.env, cfg.env_kwargs)  # bad env kwargs fail here, naming the key
     kwargs = model_kwargs(cfg)
     try:  # the constructor checks the hyperparameter values before any worker starts
-        cls(cfg["policy"], _spaces_env(*spaces), device="cpu", **kwargs)
+        cls(cfg.policy, _spaces_env(*spaces), device="cpu", **kwargs)
     except (TypeError, ValueError, AssertionError) as exc:
         raise SpreadgymError(f"{algo} hyperparameters: {exc}") from None
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    total = cfg["n_timesteps"]
+    total = cfg.n_timesteps
     resumed_from = None
     model = None
     venv = make_training_env(cfg)
@@ -433,11 +248,11 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
         if checkpoints:
             model, venv, resumed_from = _resume(cls, cfg, checkpoints, venv, out_dir, log)
         else:
-            if cfg["normalize"] is not None:
+            if cfg.normalize_kwargs is not None:
                 from stable_baselines3.common.vec_env import VecNormalize
 
-                venv = VecNormalize(venv, **cfg["normalize"])
-            model = cls(cfg["policy"], venv, device="cpu", seed=cfg["seed"], tensorboard_log=str(out_dir / "tb"),
+                venv = VecNormalize(venv, **cfg.normalize_kwargs)
+            model = cls(cfg.policy, venv, device="cpu", seed=cfg.seed, tensorboard_log=str(out_dir / "tb"),
                         verbose=0, **kwargs)
         _write_config(out_dir, cfg, model.num_timesteps, resumed_from, "running", time.monotonic() - started)
         if model.num_timesteps >= total:
@@ -462,8 +277,6 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
 
 def _spaces_env(obs_space, act_space):
     """A stand-in env with the real spaces (for the constructor check: no simulation)."""
-    import gymnasium as gym
-
     class Spaces(gym.Env):
         observation_space = obs_space
         action_space = act_space
@@ -484,11 +297,11 @@ def _resume(cls, cfg, checkpoints, venv, out_dir, log):
 
     errors = []
     for ck in checkpoints:
-        if cfg["normalize"] is not None and not ck.vecnormalize.is_file():
+        if cfg.normalize_kwargs is not None and not ck.vecnormalize.is_file():
             errors.append(f"{ck.model.name}: no {ck.vecnormalize.name}")
             continue
         try:
-            env = VecNormalize.load(str(ck.vecnormalize), venv) if cfg["normalize"] is not None else venv
+            env = VecNormalize.load(str(ck.vecnormalize), venv) if cfg.normalize_kwargs is not None else venv
             model = cls.load(ck.model, env=env, device="cpu", tensorboard_log=str(out_dir / "tb"))
             if hasattr(model, "replay_buffer"):
                 if ck.replay_buffer.is_file():
@@ -509,10 +322,10 @@ def _learn(model, cfg, total, ckpt_dir, log) -> str:
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
     flags: dict = {}
-    periodic = CheckpointCallback(save_freq=max(cfg["checkpoint_freq"] // cfg["n_envs"], 1),
+    periodic = CheckpointCallback(save_freq=max(cfg.checkpoint_freq // cfg.n_envs, 1),
                                   save_path=str(ckpt_dir), name_prefix=CHECKPOINT_PREFIX,
                                   save_replay_buffer=True, save_vecnormalize=True)
-    progress = _callbacks(total, model.num_timesteps, flags, cfg["max_minutes"])
+    progress = _callbacks(total, model.num_timesteps, flags, cfg.max_minutes)
 
     def on_signal(signum, frame):
         if flags.get("signal"):  # second Ctrl-C: stop now
@@ -523,20 +336,20 @@ def _learn(model, cfg, total, ckpt_dir, log) -> str:
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         model.learn(total_timesteps=total - model.num_timesteps, callback=CallbackList([periodic, progress]),
-                    reset_num_timesteps=False, tb_log_name=cfg["algo"], progress_bar=False)
+                    reset_num_timesteps=False, tb_log_name=cfg.algo, progress_bar=False)
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
     if flags.get("signal"):
         return "interrupted"
     if flags.get("time"):
-        log(f"stopped at the time limit of {cfg['max_minutes']:g} min ({model.num_timesteps} steps)")
+        log(f"stopped at the time limit of {cfg.max_minutes:g} min ({model.num_timesteps} steps)")
         return "time limit"
     return "done"
 
 
-def _write_config(out_dir: Path, cfg: dict, steps: int, resumed_from, stopped: str, wall_s: float) -> None:
-    record = as_yaml_config(cfg)
+def _write_config(out_dir: Path, cfg: RunConfig, steps: int, resumed_from, stopped: str, wall_s: float) -> None:
+    record = cfg.as_yaml()
     record["trained"] = {"num_timesteps": int(steps), "resumed_from": resumed_from, "stopped": stopped,
                          "wall_s_last_invocation": round(float(wall_s), 1)}
     text = ("# written by `spreadgym train`: the config of this run (a valid --config file;\n"
@@ -552,21 +365,19 @@ def _write_config(out_dir: Path, cfg: dict, steps: int, resumed_from, stopped: s
 class SavedPolicy:
     path: Path
     algo: str
-    config: dict  # validated config of the run
+    config: RunConfig  # validated config of the run
     model: Any
     obs_rms: Any  # VecNormalize (for its observation statistics) or None
 
     @property
     def env_id(self) -> str:
-        return self.config["env"]
+        return self.config.env
 
     @property
     def env_kwargs(self) -> dict:
-        return dict(self.config["env_kwargs"])
+        return dict(self.config.env_kwargs)
 
     def act(self, obs):
-        import numpy as np
-
         obs = np.asarray(obs, dtype=np.float32)
         if self.obs_rms is not None:
             obs = self.obs_rms.normalize_obs(obs)
@@ -577,8 +388,6 @@ class SavedPolicy:
 def load_policy(path) -> SavedPolicy:
     """A policy saved by `train`: DIR/model.zip (or DIR, or a checkpoint zip), with the run's
     config.yaml and VecNormalize statistics. Anything else is a SpreadgymError naming the path."""
-    import zipfile
-
     path = Path(path)
     given = path
     if path.is_dir():
@@ -609,7 +418,7 @@ def load_policy(path) -> SavedPolicy:
     except Exception as exc:
         raise SpreadgymError(f"--model {given}: could not load a {algo} policy ({type(exc).__name__}: {exc})") from None
     obs_rms = None
-    if cfg["normalize"] is not None:
+    if cfg.normalize_kwargs is not None:
         stats = (checkpoint_files(path.parent, int(match.group(1))).vecnormalize if match
                  else run_dir / "vecnormalize.pkl")
         if not stats.is_file():

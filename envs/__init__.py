@@ -39,7 +39,7 @@ def settings_to_action(env, settings: Mapping[str, Any]) -> np.ndarray:
     `pitch_per_vane`) and `deflector_angle_deg` (one per adjustable deflector; may be
     left out when there is none). A value outside its range is a ConfigError naming it.
     """
-    from spreadgym.envs.actions import Settings
+    from spreadgym.envs.common.actions import Settings
 
     from spreadgym.errors import ConfigError
 

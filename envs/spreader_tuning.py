@@ -25,19 +25,19 @@ Observation (float32, every entry in [-1, 1]), in this order:
 from __future__ import annotations
 
 import copy
-from typing import Any, Optional
+from typing import Optional
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from spreadgym.envs import reward as rewards
-from spreadgym.envs.actions import check_action
-from spreadgym.envs.config import TUNING, load_env_config
-from spreadgym.envs.render import HumanViewer, draw_frame
-from spreadgym.envs.spinner_design import SEED_BOUND, Context, Task, check_reset_options, frame_lines, info_metrics
+from spreadgym.envs.common import reward as rewards
+from spreadgym.envs.common.actions import check_action
+from spreadgym.envs.common.base_env import SpreadgymEnv
+from spreadgym.envs.common.config import TUNING
+from spreadgym.envs.common.render import draw_frame, frame_lines
+from spreadgym.envs.common.task import SEED_BOUND, check_reset_options, info_metrics
 
 from spreadgym.config.scene import Scene
-from spreadgym.errors import ConfigError
 from spreadgym.spread import pattern
 
 SUMMARY_NAMES = ["cv", "swath", "landed", "steps_left"]
@@ -76,17 +76,13 @@ def bout_features(trays: pattern.Trays, bout_width_m: float, driving: str, bins:
     return np.clip(masses / mean / 2.0, 0.0, 1.0) if mean > 0 else np.zeros(bins)
 
 
-class SpreaderTuningEnv(gym.Env):
+class SpreaderTuningEnv(SpreadgymEnv):
     """Adjust rpm, vane pitch and deflector angles step by step until the tray test passes."""
 
-    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 4}
+    config_name = TUNING
 
-    def __init__(self, render_mode: Optional[str] = None, **kwargs: Any):
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ConfigError("render_mode", f"unknown {render_mode!r}; allowed: {self.metadata['render_modes']}")
-        self.render_mode = render_mode
-        self.config = load_env_config(TUNING, kwargs)
-        self.task = Task(self.config)
+    def __init__(self, render_mode: Optional[str] = None, **kwargs):
+        super().__init__(render_mode, **kwargs)
         smap = self.task.settings_map
         obs_cfg = self.config.observation
         self.observation_names = (
@@ -96,18 +92,13 @@ class SpreaderTuningEnv(gym.Env):
             + [f"single_pass[{i}]" for i in range(obs_cfg.single_pass_bins)]
             + [f"bout[{i}]" for i in range(obs_cfg.bout_bins)]
         )
-        self.action_space = smap.space
         self.observation_space = spaces.Box(-1.0, 1.0, shape=(len(self.observation_names),), dtype=np.float32)
         self.reward_bounds = rewards.tuning_reward_bounds(self.config.reward)
-        self._context: Optional[Context] = None
         self._ended = False
         self._scene: Optional[Scene] = None
-        self._context_info: dict = {}
         self._context_obs = np.zeros(self.task.context_size, dtype=np.float32)
         self._unit = np.zeros(smap.size)
         self._steps = 0
-        self._last = None  # (scene, result, settings, score, reward)
-        self._viewer: Optional[HumanViewer] = None
 
     # -- gymnasium API -----------------------------------------------------------------
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
@@ -148,7 +139,7 @@ class SpreaderTuningEnv(gym.Env):
         self._unit = np.clip(self._unit + self.config.max_change * a, -1.0, 1.0)
         self._steps += 1
         result, settings, score = self._tray_test()
-        cv = result.metrics.get("cv_percent_at_target")
+        cv = result.metrics.cv_percent_at_target
         terminated = bool(cv is not None and cv <= self.config.goal_cv_percent)
         truncated = bool(not terminated and self._steps >= self.config.max_steps)
         self._ended = terminated or truncated
@@ -159,33 +150,16 @@ class SpreaderTuningEnv(gym.Env):
             self.render()
         return self._observation(result, score), reward, terminated, truncated, info
 
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn(
-                "render() was called without a render mode; "
-                'make the env with render_mode="rgb_array" or "human"'
-            )
-            return None
+    # -- internals -----------------------------------------------------------------------
+    def _frame(self) -> np.ndarray:
         r = self.config.render
         if self._last is None:
-            frame = draw_frame(self.task.base_scene, None, r.width_px, r.height_px, r.trajectories,
-                               ["call reset() first"])
-        else:
-            scene, result, settings, score, reward = self._last
-            extra = [f"step {self._steps}/{self.config.max_steps}, goal CV <= {self.config.goal_cv_percent:g} %"]
-            lines = frame_lines(self._context, settings, score, reward if reward is not None else float("nan"), extra)
-            frame = draw_frame(scene, result, r.width_px, r.height_px, r.trajectories, lines)
-        if self.render_mode == "rgb_array":
-            return frame
-        if self._viewer is None:
-            self._viewer = HumanViewer(self.metadata["render_fps"])
-        self._viewer.show(frame)
-        return None
-
-    def close(self):
-        if self._viewer is not None:
-            self._viewer.close()
-            self._viewer = None
+            return draw_frame(self.task.base_scene, None, r.width_px, r.height_px, r.trajectories,
+                              ["call reset() first"])
+        scene, result, settings, score, reward = self._last
+        extra = [f"step {self._steps}/{self.config.max_steps}, goal CV <= {self.config.goal_cv_percent:g} %"]
+        lines = frame_lines(self._context, settings, score, reward if reward is not None else float("nan"), extra)
+        return draw_frame(scene, result, r.width_px, r.height_px, r.trajectories, lines)
 
     # -- internals -----------------------------------------------------------------------
     def _tray_test(self):

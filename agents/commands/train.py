@@ -6,7 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from spreadgym.agents.training import train
+
 from spreadgym.cli import arguments
+from spreadgym.config.overrides import parse_assignments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -16,7 +19,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="hyperparameter YAML (default: configs/agents/ALGO.yaml)")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config key, VALUE parsed as YAML (e.g. n_envs=1, env_kwargs.granules=100)")
-    parser.add_argument("--timesteps", type=arguments.COUNT, metavar="N", help="total env steps (default: the config's)")
+    parser.add_argument("--timesteps", type=arguments.COUNT, metavar="N",
+                        help="total env steps (default: the config's)")
     parser.add_argument("--seed", type=arguments.SEED, metavar="S", help="seed (default: the config's)")
     parser.add_argument("--max-minutes", type=arguments.real(0.0, 1e6, low_open=True), metavar="M",
                         help="stop (and save) after M minutes of training in this invocation")
@@ -25,10 +29,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from spreadgym.agents.training import train
-
-    from spreadgym.config.overrides import parse_assignments
-
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 

@@ -41,9 +41,9 @@ def run(args: argparse.Namespace) -> int:
 
         written = write_simulation_plots(result, args.plot)
     if args.json:
-        print_json(result.metrics)
+        print_json(result.metrics.to_json())
     else:
-        print(summary(result.metrics, scene.name))
+        print(summary(result.metrics.to_json(), scene.name))
         for path in written:
             print(f"wrote {path}")
     return 0

@@ -5,13 +5,13 @@ unknown keys are errors, values are frozen, and no float may be NaN or infinite.
 Numbers are strict: `true` is not a number and `"200"` is not an integer (YAML and
 `--set` parse numbers themselves), while an integer is accepted where a float is due.
 `format_validation_error` turns pydantic's first complaint into one `ConfigError` line
-naming the dotted key, the bad value and the allowed range.
+naming the dotted key, the bad value and the allowed range; `validate` applies it.
 """
 
 from __future__ import annotations
 
 import re
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any, Optional, TypeVar
 
 import annotated_types
 from pydantic import BaseModel, ConfigDict, Strict, ValidationError
@@ -24,6 +24,9 @@ Integer = Annotated[int, Strict()]  # an int; bools, floats and strings not
 
 class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+ModelT = TypeVar("ModelT", bound=BaseModel)
 
 
 _BOUNDS = {annotated_types.Ge: (">=", "ge"), annotated_types.Gt: (">", "gt"), annotated_types.Le: ("<=", "le"),
@@ -85,3 +88,11 @@ def format_validation_error(exc: ValidationError, model: type[BaseModel], root: 
                                           "finite_number"}:
             message += f"; allowed: {allowed}"
     return ConfigError(key, message)
+
+
+def validate(model: type[ModelT], raw: Any, root: str) -> ModelT:
+    """`model` validated from the mapping `raw`; the first problem is a one-line ConfigError."""
+    try:
+        return model.model_validate(raw)
+    except ValidationError as exc:
+        raise format_validation_error(exc, model, root) from None

@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal, Mapping, Optional, Union
 
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, model_validator
 
-from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error
+from spreadgym.config.base import Integer, Real, StrictModel, validate
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.config.resources import read_yaml, resolve_named
 from spreadgym.errors import ConfigError
@@ -221,10 +221,7 @@ def _segment_distance_to_origin(a: tuple[float, float], b: tuple[float, float]) 
 
 def scene_from_dict(raw: Mapping[str, Any]) -> Scene:
     """Validate a scene mapping; the first problem becomes a ConfigError naming its key."""
-    try:
-        return Scene.model_validate(dict(raw))
-    except ValidationError as exc:
-        raise format_validation_error(exc, Scene, "scene") from None
+    return validate(Scene, dict(raw), "scene")
 
 
 def load_scene_dict(name_or_path: str = "paper") -> dict:
@@ -247,4 +244,4 @@ def scene_with(scene: Scene, overrides: Mapping[str, Any]) -> Scene:
     Overrides act on the full dump (defaults included), so an optional key the YAML
     left out can still be set.
     """
-    return scene_from_dict(apply_overrides(scene.model_dump(), overrides))
+    return scene_from_dict(apply_overrides(scene.model_dump(), overrides, Scene))

@@ -237,15 +237,3 @@ def swath_from_curve(widths_m: np.ndarray, cvs_percent: np.ndarray, threshold_pe
         raise ConfigError("pattern.cv_threshold_percent", f"must be > 0, got {threshold_percent!r}")
     ok = np.isfinite(cvs_percent) & (cvs_percent <= thr * (1.0 + 1e-12))
     return float(widths_m[ok].max()) if ok.any() else 0.0
-
-
-def mass_balance(released_kg: float, landed_kg: float, retained_kg: float = 0.0) -> dict[str, float]:
-    """Where the released mass went; `unaccounted_kg` should be ~0 (rounding)."""
-    released, landed, retained = float(released_kg), float(landed_kg), float(retained_kg)
-    return {
-        "released_kg": released,
-        "landed_kg": landed,
-        "retained_kg": retained,
-        "unaccounted_kg": released - landed - retained,
-        "landed_fraction": landed / released if released > 0 else float("nan"),
-    }

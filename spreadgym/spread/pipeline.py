@@ -1,7 +1,7 @@
 """The whole chain for one scene: spinner -> deflectors -> flight -> tray pattern -> metrics.
 
 `run_scene` is what `spreadgym simulate` and the environments call. Its `metrics`
-dict is the JSON of `spreadgym simulate --json`.
+(`RunMetrics`) give the JSON of `spreadgym simulate --json` through `.to_json()`.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
 from spreadgym.physics.stepped.spring_damper import simulate_spring_damper
 from spreadgym.spread import estimate, pattern
 from spreadgym.spread import flight as flight_model
+from spreadgym.spread.metrics import RunMetrics
 
 
 @dataclass
@@ -36,7 +37,7 @@ class SimulationResult:
     landing: flight_model.Landing
     trays: pattern.Trays
     replicate_masses_kg: np.ndarray  # (K, T) tray masses of each independent replicate
-    metrics: dict
+    metrics: RunMetrics
 
 
 def run_spinner(
@@ -102,8 +103,34 @@ def run_scene(
     trays, replicate_masses = estimate.replicate_tray_masses(
         landing.position_m[:, 0], landed_mass, granules.replicate[flying], int(granules.replicate.max()) + 1,
         p.tray_width_m, min_half_width_m=p.target_swath_m)
-    metrics = _metrics(scene, chosen, reason, granules, departure, launch, trays, replicate_masses, ci)
-    metrics["wall_s"] = time.perf_counter() - started
+    at_target = estimate.estimate_cv(replicate_masses, p.tray_width_m, p.target_swath_m, p.driving)
+    has_mass = trays.total_kg > 0.0
+    widths = pattern.default_widths_m(trays) if has_mass else np.zeros(0)
+    cvs, _ = estimate.cv_curve(replicate_masses, p.tray_width_m, p.driving, widths)
+    metrics = RunMetrics(
+        model=chosen,
+        model_reason=reason,
+        dt_s=departure.dt_s if departure.dt_s > 0.0 else None,  # None: closed forms, no step
+        granules=granules.count,
+        outcomes=departure.outcome_counts(),
+        departure=departure_summary(departure, scene.spinner.omega_rad_s),
+        target_swath_m=p.target_swath_m,
+        driving=p.driving,
+        tray_width_m=p.tray_width_m,
+        cv_threshold_percent=p.cv_threshold_percent,
+        cv_percent_at_target=at_target.cv_percent,
+        cv_standard_error_percent=at_target.standard_error_percent,
+        cv_raw_percent=at_target.raw_percent,
+        cv_ci_percent=list(at_target.interval_percent) if ci and at_target.interval_percent is not None else None,
+        effective_swath_m=pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent) if has_mass else 0.0,
+        curve_bout_width_m=widths,
+        curve_cv_percent=cvs,
+        trays=trays,
+        released_kg=float(granules.mass_kg.sum()),
+        retained_kg=float(granules.mass_kg[~departure.departed].sum()),
+        notes=_notes(scene, chosen, departure, launch, trays),
+        wall_s=time.perf_counter() - started,
+    )
     return SimulationResult(scene, granules, departure, launch, landing, trays, replicate_masses, metrics)
 
 
@@ -128,40 +155,13 @@ def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
     }
 
 
-def _metrics(scene, model, reason, granules, departure, launch, trays, replicate_masses, ci) -> dict:
+def _notes(scene: Scene, model: str, departure: Departure, launch: Departure, trays: pattern.Trays) -> list[str]:
+    """Warnings about the run: the deflectors' own, an ignored time step, passes that do not meet."""
     p = scene.pattern
-    released = float(granules.mass_kg.sum())
-    landed = trays.total_kg
-    retained = float(granules.mass_kg[~departure.departed].sum())
-    has_mass = landed > 0.0
-    at_target = estimate.estimate_cv(replicate_masses, p.tray_width_m, p.target_swath_m, p.driving)
-    interval = list(at_target.interval_percent) if ci and at_target.interval_percent is not None else None
-    widths = pattern.default_widths_m(trays) if has_mass else np.zeros(0)
-    cvs, _ = estimate.cv_curve(replicate_masses, p.tray_width_m, p.driving, widths)
     notes = list(launch.notes)
     if departure.dt_s == 0.0 and scene.sim.dt_s is not None:
         notes.append(f"sim.dt_s = {scene.sim.dt_s:g} s is ignored: the {model} model has no time step")
-    if has_mass and p.target_swath_m > 2.0 * trays.pattern_width_m:
+    if trays.total_kg > 0.0 and p.target_swath_m > 2.0 * trays.pattern_width_m:
         notes.append(f"the target swath {p.target_swath_m:g} m is over twice the pattern's width "
                      f"({trays.pattern_width_m:g} m): passes do not meet, so the CV there says little")
-    return {
-        "model": model,
-        "model_reason": reason,
-        "dt_s": departure.dt_s if departure.dt_s > 0.0 else None,  # None: closed forms, no step
-        "granules": granules.count,
-        "outcomes": departure.outcome_counts(),
-        "departure": departure_summary(departure, scene.spinner.omega_rad_s),
-        "target_swath_m": p.target_swath_m,
-        "driving": p.driving,
-        "tray_width_m": p.tray_width_m,
-        "cv_threshold_percent": p.cv_threshold_percent,
-        "cv_percent_at_target": at_target.cv_percent,
-        "cv_standard_error_percent": at_target.standard_error_percent,
-        "cv_raw_percent": at_target.raw_percent,
-        "cv_ci_percent": interval,
-        "effective_swath_m": pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent) if has_mass else 0.0,
-        "cv_curve": {"bout_width_m": widths, "cv_percent": cvs},
-        "trays": {"center_m": trays.center_m, "mass_kg": trays.mass_kg},
-        "mass": {"released_kg": released, "landed_kg": landed, "retained_kg": retained},
-        "notes": notes,
-    }
+    return notes

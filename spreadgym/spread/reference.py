@@ -62,11 +62,11 @@ def pool_runs(scene: Scene, runs: int, model: str = "auto", library: Optional[Ma
         replicates.append(result.granules.replicate[flying] + j * per_run)
         granules += result.granules.count
         released += float(result.granules.mass_kg.sum())
-        wall += result.metrics["wall_s"]
+        wall += result.metrics.wall_s
         if progress:
             progress(j + 1, runs)
     return PooledLandings(np.concatenate(xs), np.concatenate(masses), np.concatenate(replicates),
-                          runs * per_run, granules, released, result.metrics["model"], result.metrics["model_reason"],
+                          runs * per_run, granules, released, result.metrics.model, result.metrics.model_reason,
                           wall)
 
 

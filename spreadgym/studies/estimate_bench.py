@@ -40,9 +40,9 @@ def cv_noise_rows(scene_name: str = "paper", model: str = "analytic", counts=NOI
             for seed in range(seeds):
                 scene = load_scene(scene_name, {**base, "sim.granules": n, "sim.seed": seed, "sim.sampler": sampler})
                 m = run_scene(scene, model=model).metrics
-                raw.append(m["cv_raw_percent"])
-                corrected.append(m["cv_percent_at_target"])
-                walls.append(m["wall_s"])
+                raw.append(m.cv_raw_percent)
+                corrected.append(m.cv_percent_at_target)
+                walls.append(m.wall_s)
             for estimator, values in (("plain", np.array(raw)), ("corrected", np.array(corrected))):
                 rows.append({
                     "scene": scene_name, "model": model, "sampler": sampler, "estimator": estimator, "granules": n,
@@ -106,9 +106,9 @@ def target_rows(references_dir: Path, model: str = "pymunk", seeds: int = 10, na
         cvs, swaths, walls = [], [], []
         for seed in range(seeds):
             m = run_scene(scene_with(family[name], {"sim.seed": FIRST_TARGET_SEED + seed}), model=model).metrics
-            cvs.append(m["cv_percent_at_target"])
-            swaths.append(m["effective_swath_m"])
-            walls.append(m["wall_s"])
+            cvs.append(m.cv_percent_at_target)
+            swaths.append(m.effective_swath_m)
+            walls.append(m.wall_s)
         cvs = np.array(cvs, dtype=float)
         rows.append({
             "scene": name, "model": model, "granules": family[name].sim.granules, "seeds": seeds,

@@ -84,18 +84,6 @@ def paper_cases() -> list[Case]:
     return cases
 
 
-def quick_cases() -> list[Case]:
-    """A reduced set for tests: two materials, two speeds, two diameters."""
-    return [
-        Case("material", "mc", BASE_RPM, BASE_DIAMETER_M),
-        Case("material", "steel", BASE_RPM, BASE_DIAMETER_M),
-        Case("rpm", BASE_MATERIAL, 200.0, BASE_DIAMETER_M),
-        Case("rpm", BASE_MATERIAL, 800.0, BASE_DIAMETER_M),
-        Case("diameter", BASE_MATERIAL, BASE_RPM, 0.2),
-        Case("diameter", BASE_MATERIAL, BASE_RPM, 0.4),
-    ]
-
-
 def study_scene(case: Case, granules: int, rotation: str, seed: int = 0) -> Scene:
     """The validated `paper` scene of one case."""
     return load_scene(SCENE, case.overrides(granules, rotation, seed))

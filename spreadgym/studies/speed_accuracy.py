@@ -69,9 +69,9 @@ def speed_accuracy_rows(references_dir: Path, scenes=SCENES, models=("compiled",
                 except ConfigError as refused:  # a step beyond a stability limit: the guard said no
                     note = f"refused: {refused}"
                     break
-                cvs.append(m["cv_percent_at_target"] if m["cv_percent_at_target"] is not None else 100.0)
-                swaths.append(m["effective_swath_m"])
-                walls.append(m["wall_s"])
+                cvs.append(m.cv_percent_at_target if m.cv_percent_at_target is not None else 100.0)
+                swaths.append(m.effective_swath_m)
+                walls.append(m.wall_s)
             errors = np.array(cvs) - ref["cv_percent_at_target"]
             rows.append({
                 "scene": name, "model": model, "granules": n, "dt_factor": factor or 1.0, "seeds": len(cvs),

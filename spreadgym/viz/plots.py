@@ -282,7 +282,7 @@ def transverse_pattern(ax, result, legend: bool = True) -> None:
     trays = result.trays
     p = result.scene.pattern
     W, w = p.target_swath_m, trays.width_m
-    cv = result.metrics.get("cv_percent_at_target")
+    cv = result.metrics.cv_percent_at_target
     if trays.total_kg <= 0:
         _note(ax, "nothing landed")
         ax.set_xlim(trays.center_m[0] - w, trays.center_m[-1] + w)
@@ -319,15 +319,14 @@ def transverse_pattern(ax, result, legend: bool = True) -> None:
 def cv_vs_bout_width(ax, result) -> None:
     """CV against bout width with the threshold, the effective swath and the target swath."""
     metrics, p = result.metrics, result.scene.pattern
-    curve = metrics.get("cv_curve") or {}
-    widths = np.asarray(curve.get("bout_width_m", []), dtype=float)
-    cvs = np.asarray(curve.get("cv_percent", []), dtype=float)
+    widths = np.asarray(metrics.curve_bout_width_m, dtype=float)
+    cvs = np.asarray(metrics.curve_cv_percent, dtype=float)
     if widths.size == 0 and result.trays.total_kg > 0:
         widths, cvs = pattern.cv_curve(result.trays, p.driving)
-    threshold = float(metrics.get("cv_threshold_percent", p.cv_threshold_percent))
-    target = float(metrics.get("target_swath_m", p.target_swath_m))
-    effective = float(metrics.get("effective_swath_m") or 0.0)
-    cv_target = metrics.get("cv_percent_at_target")
+    threshold = float(metrics.cv_threshold_percent)
+    target = float(metrics.target_swath_m)
+    effective = float(metrics.effective_swath_m or 0.0)
+    cv_target = metrics.cv_percent_at_target
 
     finite = np.isfinite(cvs)
     top = max(2.0 * threshold, 1.1 * float(cvs[finite].max()) if finite.any() else 0.0)
@@ -341,7 +340,7 @@ def cv_vs_bout_width(ax, result) -> None:
     ax.axvline(target, color=TARGET, ls=":", lw=1.6, zorder=2.5, label=f"target swath {target:g} m")
     if cv_target is not None and np.isfinite(cv_target):
         label = f"CV at target {cv_target:.1f} %"
-        ci = metrics.get("cv_ci_percent")
+        ci = metrics.cv_ci_percent
         if ci is not None and len(ci) == 2 and np.all(np.isfinite(ci)):
             lo, hi = float(min(ci)), float(max(ci))
             ax.plot([target, target], [lo, min(hi, top)], color="black", lw=1.4, zorder=3.5,
@@ -382,37 +381,3 @@ def write_simulation_plots(result, out_dir) -> list[Path]:
         fig.savefig(path, dpi=DPI)
         written.append(path)
     return written
-
-
-def _shrink(ax, title=8.5, label=7.5, ticks=7.0) -> None:
-    ax.title.set_fontsize(title)
-    ax.xaxis.label.set_fontsize(label)
-    ax.yaxis.label.set_fontsize(label)
-    ax.tick_params(labelsize=ticks)
-    for text in ax.texts:
-        text.set_fontsize(ticks)
-    leg = ax.get_legend()
-    if leg is not None:
-        for text in leg.get_texts():
-            text.set_fontsize(ticks)
-
-
-def render_rgb(result, width_px: int = 600, height_px: int = 400) -> np.ndarray:
-    """Plan view (left) and transverse pattern (right) as a uint8 (height, width, 3) image."""
-    fig = _new_figure(figsize=(width_px / DPI, height_px / DPI), dpi=DPI)
-    left, right = fig.subplots(1, 2, width_ratios=[1.0, 1.1])
-    plan_view(left, result, max_tracks=15, max_rays=50, legend=False)
-    transverse_pattern(right, result, legend=False)
-    for ax in (left, right):
-        _shrink(ax)
-    if right.get_legend_handles_labels()[0]:
-        right.legend(loc="upper center", ncol=3, fontsize=6.5, handlelength=1.2, columnspacing=0.8,
-                     borderpad=0.3, handletextpad=0.4, framealpha=0.9)
-    left.title.set_text(left.get_title().replace("Plan view: ", ""))
-    right.title.set_text(right.get_title().replace("Transverse pattern: ", ""))
-    fig.canvas.draw()
-    rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
-    image = np.full((height_px, width_px, 3), 255, dtype=np.uint8)
-    h, w = min(height_px, rgb.shape[0]), min(width_px, rgb.shape[1])
-    image[:h, :w] = rgb[:h, :w]
-    return image

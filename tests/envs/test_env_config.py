@@ -2,7 +2,7 @@
 
 import pytest
 
-from spreadgym.envs.config import load_env_config
+from spreadgym.envs.common.config import load_env_config
 
 
 @pytest.mark.parametrize("name", ["spinner_design", "spreader_tuning"])

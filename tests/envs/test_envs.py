@@ -13,16 +13,17 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from gymnasium.utils.env_checker import data_equivalence
+from spreadgym.envs.common import reward as rewards
+from spreadgym.envs.common.config import DESIGN, TUNING, load_env_config
+from spreadgym.envs.spreader_tuning import bout_features, rebin, single_pass_features
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import spreadgym  # noqa: F401  (registers the envs)
-from spreadgym.envs import reward as rewards
-from spreadgym.envs.config import DESIGN, TUNING, load_env_config
-from spreadgym.envs.spreader_tuning import bout_features, rebin, single_pass_features
 from spreadgym.errors import ConfigError
-from spreadgym.spread.pattern import Trays
 from spreadgym.config.scene import load_scene
 from spreadgym.physics.selection import choose_model
+from spreadgym.spread.metrics import RunMetrics
+from spreadgym.spread.pattern import Trays
 
 DESIGN_ID = "spreadgym/SpinnerDesign-v0"
 TUNING_ID = "spreadgym/SpreaderTuning-v0"
@@ -209,8 +210,14 @@ def test_tuning_reward_within_declared_bounds_over_random_actions():
 
 
 def _metrics(cv, effective, released, landed, target=4.0):
-    return {"cv_percent_at_target": cv, "effective_swath_m": effective, "target_swath_m": target,
-            "mass": {"released_kg": released, "landed_kg": landed, "retained_kg": released - landed}}
+    """Run metrics with only what the reward reads: the rest is empty or zero."""
+    return RunMetrics(
+        model="analytic", model_reason="", dt_s=None, granules=0, outcomes={}, departure={},
+        target_swath_m=target, driving="racetrack", tray_width_m=0.5, cv_threshold_percent=15.0,
+        cv_percent_at_target=cv, cv_standard_error_percent=None, cv_raw_percent=cv, cv_ci_percent=None,
+        effective_swath_m=effective, curve_bout_width_m=np.zeros(0), curve_cv_percent=np.zeros(0),
+        trays=Trays(np.zeros(1), np.array([landed]), 0.5), released_kg=released, retained_kg=released - landed,
+    )
 
 
 @pytest.mark.parametrize(

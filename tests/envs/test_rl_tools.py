@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 from spreadgym.envs import action_to_settings, setting_ranges, settings_to_action
-from spreadgym.envs.config import DESIGN, TUNING, load_env_config
+from spreadgym.envs.common.config import DESIGN, TUNING, load_env_config
 from spreadgym.envs.vector import SpinnerDesignVectorEnv
 from spreadgym.envs.zoo import hyperparams_path
 

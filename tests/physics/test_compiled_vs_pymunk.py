@@ -29,8 +29,8 @@ def test_compiled_matches_pymunk_on_reference_scenes(name, granules):
     f, p = fast.metrics, full.metrics
     # CV: both estimates carry their standard errors; 3 combined SE (positively correlated
     # samples make this conservative), and never looser than the 0.5 pp when the SE is small.
-    se = np.hypot(f["cv_standard_error_percent"], p["cv_standard_error_percent"])
-    assert abs(f["cv_percent_at_target"] - p["cv_percent_at_target"]) <= max(3.0 * se, 0.5)
+    se = np.hypot(f.cv_standard_error_percent, p.cv_standard_error_percent)
+    assert abs(f.cv_percent_at_target - p.cv_percent_at_target) <= max(3.0 * se, 0.5)
     # time on the spinner: means within 3 combined standard errors, medians within the 3 %
     df, dp = fast.departure, full.departure
     tf, tp = df.time_s[df.departed], dp.time_s[dp.departed]

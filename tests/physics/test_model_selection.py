@@ -30,7 +30,7 @@ def test_auto_picks_compiled_inside_the_validated_envelope_and_pymunk_outside():
 ])
 def test_analytic_and_pymunk_agree_on_departure_speed_within_half_a_percent(overrides):
     scene = load_scene("paper", {"feed.drop_height_m": 0.0, "sim.granules": 150, **overrides})
-    analytic = run_scene(scene, model="analytic", ci=False).metrics["departure"]
-    pymunk = run_scene(scene, model="pymunk", ci=False).metrics["departure"]
+    analytic = run_scene(scene, model="analytic", ci=False).metrics.departure
+    pymunk = run_scene(scene, model="pymunk", ci=False).metrics.departure
     assert analytic["speed_mean_m_s"] == pytest.approx(pymunk["speed_mean_m_s"], rel=0.005)
     assert analytic["angle_mean_deg"] == pytest.approx(pymunk["angle_mean_deg"], abs=0.5)

@@ -14,7 +14,6 @@ from spreadgym.spread.pattern import (
     cv_curve,
     cv_percent,
     effective_swath_m,
-    mass_balance,
 )
 
 W_TRAY = 0.5
@@ -258,8 +257,3 @@ def test_errors_name_their_keys():
     with pytest.raises(ConfigError) as e:
         effective_swath_m(trays, "racetrack", 0.0)
     assert e.value.key == "pattern.cv_threshold_percent"
-
-
-def test_mass_balance():
-    mb = mass_balance(10.0, 9.0, 1.0)
-    assert mb["unaccounted_kg"] == 0.0 and mb["landed_fraction"] == 0.9

@@ -20,9 +20,21 @@ PNGS = {"fig6-speed-by-material.png", "fig7-spin-by-material.png", "fig8-speed-v
         "fig9-speed-vs-diameter.png", "departure-angle.png"}
 
 
+def quick_cases() -> list[study.Case]:
+    """A reduced set: two materials, two speeds, two diameters."""
+    return [
+        study.Case("material", "mc", study.BASE_RPM, study.BASE_DIAMETER_M),
+        study.Case("material", "steel", study.BASE_RPM, study.BASE_DIAMETER_M),
+        study.Case("rpm", study.BASE_MATERIAL, 200.0, study.BASE_DIAMETER_M),
+        study.Case("rpm", study.BASE_MATERIAL, 800.0, study.BASE_DIAMETER_M),
+        study.Case("diameter", study.BASE_MATERIAL, study.BASE_RPM, 0.2),
+        study.Case("diameter", study.BASE_MATERIAL, study.BASE_RPM, 0.4),
+    ]
+
+
 @pytest.fixture(scope="module")
 def rows():
-    return study.paper_study(granules=10, cases=study.quick_cases())
+    return study.paper_study(granules=10, cases=quick_cases())
 
 
 def _speed(rows, sweep, rotation, **match):
@@ -44,7 +56,7 @@ def test_paper_cases_cover_the_paper():
 
 
 def test_rows_have_the_keys_and_every_granule_departs(rows):
-    assert len(rows) == 2 * len(study.quick_cases())
+    assert len(rows) == 2 * len(quick_cases())
     for row in rows:
         assert ROW_KEYS <= set(row)
         assert row["departed"] == 10
@@ -77,7 +89,7 @@ def test_closed_form_tracks_the_simulation(rows):
 
 def test_progress_and_bad_input():
     calls = []
-    study.paper_study(granules=2, cases=study.quick_cases()[:1], rotations=("locked",),
+    study.paper_study(granules=2, cases=quick_cases()[:1], rotations=("locked",),
                       progress=lambda done, total: calls.append((done, total)))
     assert calls == [(1, 1)]
     with pytest.raises(SpreadgymError):
@@ -98,10 +110,10 @@ def test_write_and_plot(rows, tmp_path):
 
 
 def test_cli_writes_the_files(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(study, "paper_cases", study.quick_cases)
+    monkeypatch.setattr(study, "paper_cases", quick_cases)
     assert main(["study", "paper", "--granules", "3", "--out", str(tmp_path), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert set(data) == {"rows"} and len(data["rows"]) == 2 * len(study.quick_cases())
+    assert set(data) == {"rows"} and len(data["rows"]) == 2 * len(quick_cases())
     assert {p.name for p in tmp_path.iterdir()} == PNGS | {study.CSV_NAME}
 
 

@@ -63,16 +63,6 @@ def test_write_simulation_plots(result, tmp_path):
         assert path.stat().st_size > 10_000, path.name  # something was drawn
 
 
-def test_render_rgb(result):
-    image = plots.render_rgb(result)
-    assert image.shape == (400, 600, 3)
-    assert image.dtype == np.uint8
-    assert image.std() > 10.0
-    assert np.unique(image.reshape(-1, 3), axis=0).shape[0] > 50
-    odd = plots.render_rgb(result, width_px=333, height_px=211)
-    assert odd.shape == (211, 333, 3) and odd.dtype == np.uint8
-
-
 def test_plan_view_draws_deflectors_and_bounced_rays(deflected):
     fig, ax = _axes()
     plots.plan_view(ax, deflected)
@@ -132,11 +122,10 @@ def test_nothing_landed_still_draws(result, tmp_path):
         launch=kept,
         landing=dataclasses.replace(result.landing, position_m=np.zeros((0, 2)), time_s=np.zeros(0)),
         trays=pattern.Trays(result.trays.center_m, np.zeros(result.trays.count), result.trays.width_m),
-        metrics={**result.metrics, "cv_percent_at_target": None, "effective_swath_m": 0.0,
-                 "cv_curve": {"bout_width_m": np.zeros(0), "cv_percent": np.zeros(0)}},
+        metrics=dataclasses.replace(result.metrics, cv_percent_at_target=None, effective_swath_m=0.0,
+                                    curve_bout_width_m=np.zeros(0), curve_cv_percent=np.zeros(0)),
     )
     assert len(plots.write_simulation_plots(empty, tmp_path)) == 4
-    assert plots.render_rgb(empty).shape == (400, 600, 3)
 
 
 def test_no_pyplot_global_state():

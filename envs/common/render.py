@@ -21,7 +21,11 @@ nothing.
 
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
+from spreadgym.envs.common.actions import Settings
+from spreadgym.envs.common.task import Context
 
 from spreadgym.config.scene import Scene
 from spreadgym.physics.geometry import vane_segments
@@ -177,3 +181,21 @@ class HumanViewer:
             plt.close(self._fig)
             self._fig = None
             self._image = None
+
+
+def frame_lines(context: Optional[Context], settings: Optional[Settings], score, reward_value, extra=()) -> list[str]:
+    lines = []
+    if context is not None:
+        c = context
+        lines.append(f"job: {c.fertilizer} on {c.spinner_material}, target swath {c.target_swath_m:g} m, "
+                     f"forward {c.forward_speed_m_s:.2f} m/s, wind ({c.wind_m_s[0]:.2f}, {c.wind_m_s[1]:.2f}) m/s")
+    if settings is not None:
+        pitch = ", ".join(f"{p:.1f}" for p in settings.pitch_deg)
+        defl = ", ".join(f"{a:.1f}" for a in settings.deflector_angle_deg)
+        lines.append(f"settings: {settings.rpm:.0f} rpm, pitch [{pitch}] deg"
+                     + (f", deflectors [{defl}] deg" if defl else ""))
+    if score is not None:
+        lines.append(f"CV {score.cv_percent:.1f} %, effective swath {score.effective_swath_m:g} m, "
+                     f"landed {100 * score.landed_fraction:.0f} %, reward {reward_value:.3f}")
+    lines.extend(extra)
+    return lines

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from gymnasium import spaces
-from spreadgym.envs.config import SettingsConfig
+from spreadgym.envs.common.config import SettingsConfig
 
 from spreadgym.config.scene import Scene
 from spreadgym.errors import ConfigError

@@ -14,18 +14,18 @@ the env class):
 A key the schema does not know is an error (`ConfigError`) naming it, as is any
 value out of range. The checks that need the scene or the material library (known
 fertilizers and surfaces, a target range on the tray grid, model name) are made by
-the environment when it is built (see `spreadgym.envs.spinner_design.Task`).
+the environment when it is built (see `spreadgym.envs.common.task.Task`).
 """
 
 from __future__ import annotations
 
-import copy
 import math
 from typing import Any, Literal, Mapping, Optional
 
-from pydantic import BaseModel, Field, ValidationError, field_validator
+from pydantic import BaseModel, Field, field_validator
 
-from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error
+from spreadgym.config.base import Integer, Real, StrictModel, validate
+from spreadgym.config.overrides import apply_overrides
 from spreadgym.config.resources import read_yaml, resolve_named
 from spreadgym.errors import ConfigError
 
@@ -122,7 +122,8 @@ class RenderConfig(StrictModel):
     height_px: Integer = Field(default=640, ge=64, le=4096)
     trajectories: Integer = Field(default=150, ge=0, le=100_000, description="granule flights drawn (field view)")
     disc_tracks: Integer = Field(
-        default=10, ge=0, le=1000, description="granule paths over the disc recorded for the picture (render modes only)"
+        default=10, ge=0, le=1000,
+        description="granule paths over the disc recorded for the picture (render modes only)",
     )
 
 
@@ -164,13 +165,6 @@ class TuningConfig(DesignConfig):
 SCHEMAS: dict[str, type[DesignConfig]] = {DESIGN: DesignConfig, TUNING: TuningConfig}
 
 
-def _validate(schema: type[DesignConfig], raw: Mapping[str, Any]) -> DesignConfig:
-    try:
-        return schema.model_validate(dict(raw))
-    except ValidationError as exc:
-        raise format_validation_error(exc, schema, "config") from None
-
-
 def _sections(schema: type[BaseModel]) -> set[str]:
     """Top-level keys whose value is a sub-model (merged rather than replaced)."""
     out = set()
@@ -179,28 +173,6 @@ def _sections(schema: type[BaseModel]) -> set[str]:
         if isinstance(ann, type) and issubclass(ann, BaseModel):
             out.add(name)
     return out
-
-
-def _set_dotted(tree: dict, dotted: str, value: Any, schema: type[BaseModel]) -> None:
-    parts = dotted.split(".")
-    node: Any = tree
-    model: Optional[type[BaseModel]] = schema
-    for depth, part in enumerate(parts):
-        where = ".".join(parts[: depth + 1])
-        fields = model.model_fields if model is not None else None
-        if fields is not None and part not in fields:
-            raise ConfigError(where, f"unknown key; known keys here: {', '.join(sorted(fields))}")
-        if depth == len(parts) - 1:
-            node[part] = value
-            return
-        if fields is None:  # a free mapping (scene_overrides): the rest is one key
-            node[".".join(parts[depth:])] = value
-            return
-        if not isinstance(node.get(part), dict):
-            raise ConfigError(where, "is not a section; set it as a whole")
-        node = node[part]
-        ann = fields[part].annotation if fields is not None else None
-        model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
 
 
 def load_env_config(name: str, overrides: Optional[Mapping[str, Any]] = None) -> DesignConfig:
@@ -217,21 +189,17 @@ def load_env_config(name: str, overrides: Optional[Mapping[str, Any]] = None) ->
         raise ConfigError("config", f"{source!r} does not hold a mapping")
     # Validate the file alone first, so its own errors are reported as such, then work
     # on the full dump (defaults included) so any key can be overridden.
-    tree = _validate(schema, raw).model_dump(mode="python")
-    tree = copy.deepcopy(tree)
+    tree = validate(schema, dict(raw), "config").model_dump(mode="python")
     sections = _sections(schema)
     known = set(schema.model_fields) | {"config"}
+    assignments: dict[str, Any] = {}
     for key, value in overrides.items():
         if not isinstance(key, str):
             raise ConfigError(str(key), "keys must be strings")
-        if "." in key:
-            _set_dotted(tree, key, value, schema)
-            continue
-        if key not in known:
+        if "." not in key and key not in known:
             raise ConfigError(key, f"unknown key; known keys: {', '.join(sorted(known))}")
         if key in sections and isinstance(value, Mapping):
-            for sub_key, sub_value in value.items():
-                _set_dotted(tree, f"{key}.{sub_key}", sub_value, schema)
+            assignments.update({f"{key}.{sub_key}": sub_value for sub_key, sub_value in value.items()})
         else:
-            tree[key] = value
-    return _validate(schema, tree)
+            assignments[key] = value
+    return validate(schema, apply_overrides(tree, assignments, schema), "config")

@@ -22,7 +22,9 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-from spreadgym.envs.config import RewardConfig, TuningRewardConfig
+from spreadgym.envs.common.config import RewardConfig, TuningRewardConfig
+
+from spreadgym.spread.metrics import RunMetrics
 
 
 @dataclass(frozen=True)
@@ -47,16 +49,13 @@ def _finite_or(value, fallback: float) -> float:
     return value if math.isfinite(value) else fallback
 
 
-def score(metrics: dict, cfg: RewardConfig) -> Score:
+def score(metrics: RunMetrics, cfg: RewardConfig) -> Score:
     """Penalty terms of one run's metrics (`SimulationResult.metrics`)."""
     worst = float(cfg.cv_worst_percent)
-    cv = min(max(_finite_or(metrics.get("cv_percent_at_target"), worst), 0.0), worst)
-    target = float(metrics["target_swath_m"])
-    effective = max(_finite_or(metrics.get("effective_swath_m"), 0.0), 0.0)
-    mass = metrics["mass"]
-    released = _finite_or(mass.get("released_kg"), 0.0)
-    landed = _finite_or(mass.get("landed_kg"), 0.0)
-    landed_fraction = min(max(landed / released, 0.0), 1.0) if released > 0 else 0.0
+    cv = min(max(_finite_or(metrics.cv_percent_at_target, worst), 0.0), worst)
+    target = float(metrics.target_swath_m)
+    effective = max(_finite_or(metrics.effective_swath_m, 0.0), 0.0)
+    landed_fraction = min(max(_finite_or(metrics.landed_fraction, 0.0), 0.0), 1.0)
     cv_term = cv / worst
     swath_term = min(abs(effective - target) / target, 1.0) if target > 0 else 1.0
     retained_term = 1.0 - landed_fraction

@@ -1,0 +1,217 @@
+"""The run config of `spreadgym train`: one YAML per algorithm, validated by a pydantic model.
+
+Config: `configs/agents/ppo.yaml`, `configs/agents/sac.yaml`, flat like
+rl-baselines3-zoo's: the run keys below plus the algorithm's own keyword arguments
+(`learning_rate`, `n_steps`, `batch_size`, ...). A key that is neither a run key nor a
+keyword of the algorithm is an error naming it.
+
+Run keys:
+    algo             ppo | sac (optional; must match --algo)
+    env              env id (spreadgym:SpinnerDesign-v0 or spreadgym:SpreaderTuning-v0)
+    env_kwargs       gym.make keyword arguments (checked by the env: unknown keys fail)
+    n_envs           parallel envs: SubprocVecEnv when > 1, DummyVecEnv when 1
+    n_timesteps      total env steps of the run
+    normalize        false | true | {norm_obs, norm_reward, clip_obs, clip_reward, gamma, epsilon}
+    seed             seed of the model and the envs
+    checkpoint_freq  env steps between checkpoints
+    max_minutes      wall-clock limit of one invocation (null: none)
+    policy           MlpPolicy
+    policy_kwargs    e.g. {net_arch: [64, 64], activation_fn: tanh, log_std_init: -1.0}
+
+Learning rates (and PPO's clip_range) may be a number or `lin_<value>` (linear decay
+to 0, as in the zoo). The algorithm's keywords are read off its constructor, so
+building the schema imports stable-baselines3.
+"""
+
+from __future__ import annotations
+
+import difflib
+import functools
+import inspect
+import re
+from pathlib import Path
+from typing import Any, Literal, Optional
+
+from pydantic import Field, create_model, field_validator, model_validator
+from spreadgym.agents.evaluation import canonical_env_id
+
+from spreadgym.config.base import Integer, Real, StrictModel, validate
+from spreadgym.config.resources import config_dir, read_yaml
+from spreadgym.errors import ConfigError, SpreadgymError
+
+ALGOS = ("ppo", "sac")
+DEFAULT_ENV = "spreadgym:SpinnerDesign-v0"
+WRITTEN_KEYS = ("trained",)  # written into DIR/config.yaml by train, ignored when read back
+RESERVED = {"policy", "env", "tensorboard_log", "verbose", "seed", "device", "_init_setup_model", "policy_kwargs"}
+ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu", "silu")
+SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
+
+
+def algo_class(algo: str):
+    if algo not in ALGOS:
+        raise SpreadgymError(f"unknown algorithm {algo!r}; known: {', '.join(ALGOS)}")
+    from stable_baselines3 import PPO, SAC  # heavy (torch): only when an algorithm is needed
+
+    return {"ppo": PPO, "sac": SAC}[algo]
+
+
+def hyperparameter_names(algo: str) -> list[str]:
+    params = inspect.signature(algo_class(algo).__init__).parameters
+    return sorted(k for k in params if k != "self" and k not in RESERVED)
+
+
+class Normalize(StrictModel):
+    """VecNormalize keyword arguments; the ones left out keep stable-baselines3's defaults."""
+
+    norm_obs: Optional[bool] = None
+    norm_reward: Optional[bool] = None
+    clip_obs: Optional[Real] = Field(default=None, gt=0.0)
+    clip_reward: Optional[Real] = Field(default=None, gt=0.0)
+    gamma: Optional[Real] = Field(default=None, ge=0.0, le=1.0)
+    epsilon: Optional[Real] = Field(default=None, gt=0.0)
+
+
+class RunConfig(StrictModel):
+    """The run keys; `run_config_schema(algo)` adds the algorithm's keywords as fields."""
+
+    algo: Literal["ppo", "sac"]
+    env: str = DEFAULT_ENV
+    env_kwargs: dict[str, Any] = Field(default_factory=dict)
+    n_envs: Integer = Field(default=1, ge=1)
+    n_timesteps: Integer = Field(default=10_000, ge=1)
+    normalize: Optional[Normalize] = None  # YAML: false (None), true ({}), or the keyword arguments
+    seed: Integer = Field(default=0, ge=0)
+    checkpoint_freq: Integer = Field(default=1000, ge=1)
+    max_minutes: Optional[Real] = Field(default=None, gt=0.0)
+    policy: str = "MlpPolicy"
+    policy_kwargs: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("env_kwargs", "policy_kwargs", "seed", "env", "policy", mode="before")
+    @classmethod
+    def _null_is_default(cls, value, info):
+        """YAML's `key:` (null) means the default."""
+        if value is not None:
+            return value
+        return {"env_kwargs": {}, "policy_kwargs": {}, "seed": 0, "env": DEFAULT_ENV,
+                "policy": "MlpPolicy"}[info.field_name]
+
+    @field_validator("normalize", mode="before")
+    @classmethod
+    def _normalize_flag(cls, value):
+        """`false` (or null): no VecNormalize; `true`: VecNormalize with its defaults."""
+        if value is None or value is False:
+            return None
+        return {} if value is True else value
+
+    @field_validator("env")
+    @classmethod
+    def _env(cls, value: str) -> str:
+        return canonical_env_id(value)
+
+    @field_validator("policy_kwargs")
+    @classmethod
+    def _activation(cls, value: dict) -> dict:
+        act = value.get("activation_fn")
+        if act is not None and act not in ACTIVATIONS:
+            raise ValueError(f"activation_fn: unknown {act!r}; known: {', '.join(ACTIVATIONS)}")
+        return value
+
+    @model_validator(mode="after")
+    def _schedules(self) -> "RunConfig":
+        for key, value in self.hyperparams.items():
+            if key in SCHEDULE_KEYS:
+                schedule(value, key)  # raises on a bad value
+        return self
+
+    @property
+    def hyperparams(self) -> dict[str, Any]:
+        """The algorithm's keywords the config sets (the others keep stable-baselines3's defaults)."""
+        return {name: getattr(self, name) for name in type(self).model_fields
+                if name not in RunConfig.model_fields and name in self.model_fields_set}
+
+    @property
+    def normalize_kwargs(self) -> Optional[dict]:
+        """None (no VecNormalize) or VecNormalize keyword arguments."""
+        return None if self.normalize is None else self.normalize.model_dump(exclude_none=True)
+
+    def as_yaml(self) -> dict:
+        """The flat YAML form (what DIR/config.yaml holds); validating it gives this config back."""
+        out = {key: getattr(self, key) for key in RunConfig.model_fields}
+        kwargs = self.normalize_kwargs
+        out["normalize"] = False if kwargs is None else (kwargs or True)
+        out.update(self.hyperparams)
+        return out
+
+    def replace(self, **changes: Any) -> "RunConfig":
+        """A validated copy with some keys changed."""
+        return validate(type(self), {**self.as_yaml(), **changes}, "config")
+
+
+@functools.cache
+def run_config_schema(algo: str) -> type[RunConfig]:
+    """RunConfig with one optional field per keyword argument of the algorithm's constructor."""
+    fields = {name: (Any, None) for name in hyperparameter_names(algo)}
+    return create_model(f"{algo.upper()}RunConfig", __base__=RunConfig, **fields)
+
+
+def default_config_path(algo: str) -> Path:
+    return config_dir() / "agents" / f"{algo}.yaml"
+
+
+def read_config(path: Path) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("--config", f"no such file {str(path)!r}")
+    raw = read_yaml(path)
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise ConfigError(str(path), f"expected a mapping of keys, got {type(raw).__name__}")
+    return raw
+
+
+def validate_config(algo: str, raw: dict, where: str) -> RunConfig:
+    """The validated run config of `algo` from a flat mapping (the YAML's `trained` record ignored)."""
+    schema = run_config_schema(algo)
+    raw = {key: value for key, value in raw.items() if key not in WRITTEN_KEYS}
+    known = sorted(schema.model_fields)
+    for key in raw:
+        if key not in schema.model_fields:
+            close = difflib.get_close_matches(str(key), known, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            raise ConfigError(str(key), f"unknown key in {where}{hint}; known keys: {', '.join(known)}")
+    if raw.get("algo") not in (None, algo):
+        raise ConfigError("algo", f"{where} is a config for {raw['algo']!r}, not for {algo!r}")
+    return validate(schema, {**raw, "algo": algo}, where)
+
+
+def schedule(value: Any, key: str):
+    """A number, or 'lin_<number>': linear from <number> to 0 over the run."""
+    if isinstance(value, str):
+        match = re.fullmatch(r"lin_([0-9.eE+-]+)", value.strip())
+        if not match:
+            raise ValueError(f"{key}: expected a number or lin_<number>, got {value!r}")
+        start = float(match.group(1))
+        return lambda progress_remaining: progress_remaining * start
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{key}: expected a number or lin_<number>, got {value!r}")
+    return float(value)
+
+
+def model_kwargs(cfg: RunConfig) -> dict:
+    """Keyword arguments of the SB3 constructor from a validated config."""
+    import torch  # heavy: only when a model is built
+
+    kwargs = dict(cfg.hyperparams)
+    for key in SCHEDULE_KEYS:
+        if key in kwargs:
+            kwargs[key] = schedule(kwargs[key], key)
+    policy_kwargs = dict(cfg.policy_kwargs)
+    if "activation_fn" in policy_kwargs:
+        policy_kwargs["activation_fn"] = {
+            "tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU, "leaky_relu": torch.nn.LeakyReLU,
+            "gelu": torch.nn.GELU, "silu": torch.nn.SiLU,
+        }[policy_kwargs["activation_fn"]]
+    if policy_kwargs:
+        kwargs["policy_kwargs"] = policy_kwargs
+    return kwargs

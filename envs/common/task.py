@@ -1,0 +1,249 @@
+"""What both environments share: the base scene, the job (context) drawn per episode and
+its encoding, one simulated tray test, reset options and infos.
+
+Determinism: `Task.sample_context` draws, in this order, the fertilizer, the spinner
+material, the target swath (as a number of trays), the forward speed and the wind
+(x, y) from the env's `np_random`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from spreadgym.envs.common.actions import Settings, SettingsMap
+from spreadgym.envs.common.config import DesignConfig
+
+from spreadgym.config.materials import load_library
+from spreadgym.config.scene import Scene, load_scene, scene_with
+from spreadgym.errors import ConfigError, MaterialError
+from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.physics.selection import choose_model
+from spreadgym.spread.metrics import RunMetrics
+from spreadgym.spread.pipeline import SimulationResult, run_scene
+
+SEED_BOUND = 2**31 - 1
+
+# Fixed normalisation ranges of the material features of the context (value at -1, at +1).
+D50_RANGE_M = (1e-3, 7e-3)
+SIZE_SD_RANGE_M = (0.0, 2e-3)
+DENSITY_RANGE_KG_M3 = (500.0, 2500.0)
+FRICTION_RANGE = (0.0, 1.5)
+RESTITUTION_RANGE = (0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Context:
+    """The job of one episode."""
+
+    fertilizer: str
+    spinner_material: str
+    target_swath_m: float
+    forward_speed_m_s: float
+    wind_m_s: tuple[float, float]
+
+    def as_dict(self) -> dict:
+        return {
+            "fertilizer": self.fertilizer,
+            "spinner_material": self.spinner_material,
+            "target_swath_m": float(self.target_swath_m),
+            "forward_speed_m_s": float(self.forward_speed_m_s),
+            "wind_m_s": [float(self.wind_m_s[0]), float(self.wind_m_s[1])],
+        }
+
+
+CONTEXT_KEYS = tuple(Context.__dataclass_fields__)
+
+
+def to_unit(value: float, lo: float, hi: float) -> float:
+    """Linear map of [lo, hi] onto [-1, 1], clipped; 0 for an empty range."""
+    if not hi > lo:
+        return 0.0
+    return float(min(1.0, max(-1.0, 2.0 * (value - lo) / (hi - lo) - 1.0)))
+
+
+class Task:
+    """Base scene, context draw and encoding, and one simulated tray test."""
+
+    def __init__(self, cfg: DesignConfig):
+        self.cfg = cfg
+        self.library = load_library()
+        base = load_scene(cfg.scene, cfg.scene_overrides)
+        self.base_scene = scene_with(base, {"sim.granules": cfg.granules})
+        ctx = cfg.context
+        for name in ctx.fertilizers:
+            try:
+                self.library.fertilizer(name)
+            except MaterialError as exc:
+                raise ConfigError("context.fertilizers", str(exc)) from None
+        for name in ctx.spinner_materials:
+            try:
+                self.library.check_surface(name)
+            except MaterialError as exc:
+                raise ConfigError("context.spinner_materials", str(exc)) from None
+        self.tray_width_m = self.base_scene.pattern.tray_width_m
+        lo, hi = ctx.target_swath_m
+        self.tray_counts = (
+            max(1, math.ceil(lo / self.tray_width_m - 1e-9)),
+            math.floor(hi / self.tray_width_m + 1e-9),
+        )
+        if self.tray_counts[0] > self.tray_counts[1]:
+            raise ConfigError(
+                "context.target_swath_m",
+                f"[{lo}, {hi}] m holds no multiple of the tray width {self.tray_width_m} m",
+            )
+        self.settings_map = SettingsMap(self.base_scene, cfg.settings)
+        # Every fertilizer/material pair must resolve and the model must accept the scene.
+        for fertilizer in ctx.fertilizers:
+            for material in ctx.spinner_materials:
+                probe = Context(fertilizer, material, self.tray_counts[0] * self.tray_width_m,
+                                ctx.forward_speed_m_s[0], (ctx.wind_x_m_s[0], ctx.wind_y_m_s[0]))
+                scene = self.context_scene(probe)
+                try:
+                    resolve_contacts(scene, self.library)
+                except MaterialError as exc:
+                    raise ConfigError("context", f"{fertilizer} on {material}: {exc}") from None
+                choose_model(scene, cfg.model)
+        for end in (-1.0, 1.0):
+            settings = self.settings_map.to_settings(np.full(self.settings_map.size, end))
+            scene_with(self.base_scene, self.settings_map.scene_overrides(settings))
+        self.context_names = (
+            [f"fertilizer={f}" for f in ctx.fertilizers]
+            + [f"spinner_material={m}" for m in ctx.spinner_materials]
+            + ["d50", "size_sd", "particle_density", "disc_friction", "vane_friction", "disc_restitution",
+               "vane_restitution", "target_swath", "forward_speed", "wind_x", "wind_y"]
+        )
+        self.context_size = len(self.context_names)
+
+    # -- context ---------------------------------------------------------------------
+    def sample_context(self, rng: np.random.Generator) -> Context:
+        ctx = self.cfg.context
+        fertilizer = ctx.fertilizers[int(rng.integers(len(ctx.fertilizers)))]
+        material = ctx.spinner_materials[int(rng.integers(len(ctx.spinner_materials)))]
+        trays = int(rng.integers(self.tray_counts[0], self.tray_counts[1] + 1))
+        speed = float(rng.uniform(*ctx.forward_speed_m_s))
+        wind = (float(rng.uniform(*ctx.wind_x_m_s)), float(rng.uniform(*ctx.wind_y_m_s)))
+        return Context(fertilizer, material, trays * self.tray_width_m, speed, wind)
+
+    def replace_context(self, context: Context, given: Any) -> Context:
+        """`context` with the fields of reset's `options["context"]` put in (checked)."""
+        if not isinstance(given, dict):
+            raise ConfigError("options.context", f"expected a mapping, got {type(given).__name__}")
+        values = context.as_dict()
+        for key, value in given.items():
+            if key not in CONTEXT_KEYS:
+                raise ConfigError(f"options.context.{key}", f"unknown key; known: {', '.join(CONTEXT_KEYS)}")
+            values[key] = value
+        ctx = self.cfg.context
+        if values["fertilizer"] not in ctx.fertilizers:
+            raise ConfigError("options.context.fertilizer", f"must be one of {ctx.fertilizers}")
+        if values["spinner_material"] not in ctx.spinner_materials:
+            raise ConfigError("options.context.spinner_material", f"must be one of {ctx.spinner_materials}")
+        wind = values["wind_m_s"]
+        if not (isinstance(wind, (list, tuple)) and len(wind) == 2):
+            raise ConfigError("options.context.wind_m_s", f"expected [x, y], got {wind!r}")
+        out = Context(values["fertilizer"], values["spinner_material"], float(values["target_swath_m"]),
+                      float(values["forward_speed_m_s"]), (float(wind[0]), float(wind[1])))
+        self.context_scene(out)  # validates swath on the tray grid, speeds
+        return out
+
+    def context_scene(self, context: Context) -> Scene:
+        """The base scene set up for one job, with the fallback restitution where needed."""
+        overrides: dict[str, Any] = {
+            "fertilizer": context.fertilizer,
+            "spinner.material": context.spinner_material,
+            "pattern.target_swath_m": context.target_swath_m,
+            "flight.forward_speed_m_s": context.forward_speed_m_s,
+            "flight.wind_m_s": list(context.wind_m_s),
+        }
+        scene = scene_with(self.base_scene, overrides)
+        extra = self.fallbacks(scene)
+        return scene_with(scene, extra) if extra else scene
+
+    def fallbacks(self, scene: Scene) -> dict[str, float]:
+        """Dotted scene keys of the restitutions the library lacks and the scene leaves unset."""
+        fallback = self.cfg.fallback_restitution
+        measured = self.library.fertilizer(scene.fertilizer).restitution
+        extra: dict[str, float] = {}
+        if scene.contact.disc_restitution is None and measured.get(scene.spinner.material) is None:
+            extra["contact.disc_restitution"] = fallback.disc
+        if scene.contact.vane_restitution is None and measured.get(scene.vane_material) is None:
+            extra["contact.vane_restitution"] = fallback.vane
+        for i, plate in enumerate(scene.deflectors):
+            if plate.restitution is None and measured.get(plate.material) is None:
+                extra[f"deflectors.{i}.restitution"] = fallback.deflector
+        return extra
+
+    def encode_context(self, context: Context, scene: Scene) -> np.ndarray:
+        """The normalised context (float32, every entry in [-1, 1])."""
+        ctx = self.cfg.context
+        fert = self.library.fertilizer(context.fertilizer)
+        contacts = resolve_contacts(scene, self.library)
+        d50 = scene.granule.diameter_m if scene.granule.diameter_m is not None else fert.size.d50_m
+        sd = scene.granule.diameter_sd_m if scene.granule.diameter_sd_m is not None else fert.size.sd_m
+        values = [1.0 if f == context.fertilizer else 0.0 for f in ctx.fertilizers]
+        values += [1.0 if m == context.spinner_material else 0.0 for m in ctx.spinner_materials]
+        values += [
+            to_unit(d50, *D50_RANGE_M),
+            to_unit(sd, *SIZE_SD_RANGE_M),
+            to_unit(fert.particle_density_kg_m3, *DENSITY_RANGE_KG_M3),
+            to_unit(contacts.disc_friction, *FRICTION_RANGE),
+            to_unit(contacts.vane_friction, *FRICTION_RANGE),
+            to_unit(contacts.disc_restitution, *RESTITUTION_RANGE),
+            to_unit(contacts.vane_restitution, *RESTITUTION_RANGE),
+            to_unit(context.target_swath_m, *ctx.target_swath_m),
+            to_unit(context.forward_speed_m_s, *ctx.forward_speed_m_s),
+            to_unit(context.wind_m_s[0], *ctx.wind_x_m_s),
+            to_unit(context.wind_m_s[1], *ctx.wind_y_m_s),
+        ]
+        return np.asarray(values, dtype=np.float32)
+
+    def context_info(self, context: Context) -> dict:
+        """The context as plain data, with the fallback restitutions it needed (dotted keys)."""
+        info = context.as_dict()
+        probe = scene_with(self.base_scene, {"fertilizer": context.fertilizer,
+                                             "spinner.material": context.spinner_material})
+        info["fallback_restitution"] = self.fallbacks(probe)
+        return info
+
+    # -- simulation ------------------------------------------------------------------
+    def settings_scene(self, context_scene: Scene, settings: Settings, seed: int) -> Scene:
+        return scene_with(context_scene, {**self.settings_map.scene_overrides(settings), "sim.seed": int(seed)})
+
+    def run(self, scene: Scene, rendering: bool = False) -> SimulationResult:
+        """One tray test; with `rendering`, a few paths over the disc are kept for the picture."""
+        tracks = self.cfg.render.disc_tracks if rendering else 0
+        return run_scene(scene, model=self.cfg.model, library=self.library, ci=self.cfg.confidence_interval,
+                         tracks=tracks)
+
+
+RESET_OPTIONS = ("context",)
+
+
+def check_reset_options(options: Any) -> None:
+    """Reset options are a mapping of known keys; anything else is a ConfigError naming it."""
+    if not isinstance(options, dict):
+        raise ConfigError("options", f"expected a mapping, got {type(options).__name__}")
+    for key in options:
+        if key not in RESET_OPTIONS:
+            raise ConfigError(f"options.{key}", f"unknown reset option; known: {', '.join(RESET_OPTIONS)}")
+
+
+def info_metrics(metrics: RunMetrics) -> dict:
+    """`simulate --json` metrics as plain Python data, without the wall-clock time.
+
+    Arrays become lists (their length varies from run to run, which vector envs cannot
+    stack) and the wall time is dropped so that infos are reproducible bit for bit."""
+    return {k: _plain(v) for k, v in metrics.to_json().items() if k != "wall_s"}
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.ndarray, np.generic)):
+        return value.tolist()
+    return value
