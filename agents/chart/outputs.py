@@ -112,10 +112,11 @@ def markdown(spec: ChartSpec, payload: dict) -> str:
 
 
 def _figure(figsize):
+    """A figure laid out by hand (constrained layout costs a second per picture)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize, dpi=100, layout="constrained")
+    fig = Figure(figsize=figsize, dpi=100)
     FigureCanvasAgg(fig)
     return fig
 
@@ -128,6 +129,7 @@ def chart_figure(path: Path, spec: ChartSpec, rows: list[dict], threshold: float
     nrows = int(math.ceil(panels / ncols))
     fig = _figure((4.2 * ncols, 3.3 * nrows))
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.14 / nrows, top=1 - 0.2 / nrows, wspace=0.3, hspace=0.45)
     for fertilizer in spec.fertilizers:
         mine = sorted((r for r in rows if r["fertilizer"] == fertilizer), key=lambda r: r["width_m"])
         widths = np.array([r["width_m"] for r in mine])
@@ -171,6 +173,7 @@ def cell_figure(store: ChartStore, cell: Cell, record: dict) -> Path:
     result = SimpleNamespace(trays=trays, scene=scene, metrics=metrics)
     fig = _figure((11.0, 3.8))
     left, right = fig.subplots(1, 2)
+    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.13, top=0.84, wspace=0.18)
     transverse_pattern(left, result)
     cv_vs_bout_width(right, result)
     names = [k for k in row if k not in HEAD and k not in TAIL]

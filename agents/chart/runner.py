@@ -110,6 +110,8 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
         raise SpreadgymError(f"--workers: {workers} must be at least 1")
     if address and engine != "ray":
         raise SpreadgymError("--address needs the ray engine")
+    if address:
+        check_address(address)  # before the folder is claimed
     started = time.perf_counter()
     store = ChartStore(out, spec)
     store.open()

@@ -86,19 +86,19 @@ def parse_widths(text: str) -> tuple[float, ...]:
     """`W1,W2,...` or `LO:HI:STEP` (HI included when the steps reach it), in metres."""
     text = text.strip()
     try:
-        if ":" in text:
-            parts = [float(p) for p in text.split(":")]
-            if len(parts) != 3:
-                raise ValueError
-            lo, hi, step = parts
-            if not all(math.isfinite(v) for v in parts) or step <= 0 or hi < lo:
-                raise SpreadgymError(f"--widths {text}: LO:HI:STEP needs LO <= HI and STEP > 0")
-            count = int(math.floor((hi - lo) / step + 1e-9)) + 1
-            widths = [round(lo + i * step, 9) for i in range(count)]
-        else:
-            widths = [float(p) for p in text.split(",")]
+        parts = [float(p) for p in text.split(":" if ":" in text else ",")]
     except ValueError:
-        raise SpreadgymError(f"--widths {text!r}: expected W1,W2,... or LO:HI:STEP in metres") from None
+        parts = []
+    if not parts or (":" in text and len(parts) != 3):
+        raise SpreadgymError(f"--widths {text!r}: expected W1,W2,... or LO:HI:STEP in metres")
+    if ":" in text:
+        lo, hi, step = parts
+        if not all(math.isfinite(v) for v in parts) or step <= 0 or hi < lo:
+            raise SpreadgymError(f"--widths {text}: LO:HI:STEP needs LO <= HI and STEP > 0")
+        count = int(math.floor((hi - lo) / step + 1e-9)) + 1
+        widths = [round(lo + i * step, 9) for i in range(count)]
+    else:
+        widths = parts
     for w in widths:
         if not (math.isfinite(w) and 0.0 < w <= 100.0):
             raise SpreadgymError(f"--widths: {w:g} m is out of range; allowed (0, 100] m")
