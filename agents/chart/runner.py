@@ -27,6 +27,7 @@ from spreadgym.errors import SpreadgymError
 
 ENGINES = ("ray", "local")
 ADDRESS_TIMEOUT_S = 3.0
+WAIT_S = 0.5
 
 
 @dataclass
@@ -84,8 +85,8 @@ def _run_ray(spec: ChartSpec, todo: Sequence[Cell], workers: Optional[int], addr
         task = ray.remote(num_cpus=1)(run_cell)
         spec_ref = ray.put(spec)
         pending = {task.remote(spec_ref, cell): cell for cell in todo}
-        while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
+        while pending:  # short waits, so Ctrl-C is seen at once
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)
             for ref in ready:
                 finish(pending.pop(ref), ray.get(ref))
     finally:

@@ -20,6 +20,7 @@ from spreadgym.config.settings import SettingsSpace
 from spreadgym.errors import ConfigError, MaterialError, SpreadgymError
 from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.selection import MODELS
+from spreadgym.spread.pipeline import run_scene
 
 SEARCH_MODEL = "auto"  # the fast default objective
 VERIFY_MODEL = "pymunk"  # the full model every chart cell is verified with
@@ -194,8 +195,6 @@ def widest_pattern_m(spec: ChartSpec, space: SettingsSpace, fertilizer: str, lib
     others = space.size - 1
     corners = np.array(np.meshgrid(*([[-1.0, 1.0]] * others), indexing="ij")).reshape(others, -1).T
     step = max(1, int(math.ceil(len(corners) / MAX_PROBES)))
-    from spreadgym.spread.pipeline import run_scene
-
     widest = 0.0
     for corner in corners[::step]:
         probe = space.apply(scene, np.concatenate([[1.0], corner]))
