@@ -27,6 +27,7 @@ from typing import Optional
 import numpy as np
 from spreadgym.agents.baselines import LEADERS, Leader, cmaes_search, leaders, split_budget
 from spreadgym.agents.chart.spec import Cell, ChartSpec, cell_seed
+from spreadgym.agents.evaluation import WORST_CV_PERCENT
 
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import scene_with
@@ -34,7 +35,6 @@ from spreadgym.spread.pipeline import run_scene
 from spreadgym.spread.reference import pool_runs, reference_from
 
 SWATH_PENALTY_PERCENT = 100.0  # percentage points per unit relative swath shortfall
-WORST_CV_PERCENT = 100.0  # the CV of a run where nothing landed on the trays
 CMA_SEED_RANGE = 100_000  # cma seeds its generator with seed * 1000 + restart: keep it below 2**32
 
 

@@ -201,9 +201,3 @@ def widest_pattern_m(spec: ChartSpec, space: SettingsSpace, fertilizer: str, lib
         widest = max(widest, run_scene(probe, model=PROBE_MODEL, library=library, ci=False).trays.pattern_width_m)
     return widest
 
-
-def describe(spec: ChartSpec) -> str:
-    return (f"{len(spec.fertilizers)} fertilizer(s) x {len(spec.widths_m)} width(s), {spec.driving}; search "
-            f"{spec.budget} simulations of {spec.granules} granules ({spec.search_model}); verification "
-            f"{spec.verify_runs} x {spec.granules} granules ({spec.verify_model})")
-
