@@ -1,0 +1,187 @@
+"""What a finished chart writes: chart.csv, chart.json, chart.md (laid out like a printed
+spreading chart), chart.png and one pattern picture per cell (cells/<key>.png)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Optional
+
+import numpy as np
+from spreadgym.agents.chart.spec import Cell, ChartSpec
+from spreadgym.agents.chart.store import ChartStore, json_text, write_atomic
+
+HEAD = ["fertilizer", "width_m", "driving"]
+TAIL = ["cv_percent", "cv_standard_error_percent", "effective_swath_m", "cv_search_percent", "simulations", "wall_s"]
+
+
+def columns(rows: list[dict]) -> list[str]:
+    """The CSV columns: cell, the settings (units in their names), the results."""
+    settings = [k for k in rows[0] if k not in HEAD and k not in TAIL] if rows else []
+    return HEAD + settings + TAIL
+
+
+def widest_widths(spec: ChartSpec, rows: list[dict]) -> dict[str, Optional[float]]:
+    """Per fertilizer, the widest width whose verified CV meets the scene's threshold."""
+    threshold = spec.base_scene().pattern.cv_threshold_percent
+    out: dict[str, Optional[float]] = {}
+    for fertilizer in spec.fertilizers:
+        ok = [r["width_m"] for r in rows if r["fertilizer"] == fertilizer
+              and r["cv_percent"] is not None and r["cv_percent"] <= threshold]
+        out[fertilizer] = max(ok) if ok else None
+    return out
+
+
+def chart_payload(spec: ChartSpec, records: list[dict], notes: list[str]) -> dict:
+    rows = [r["row"] for r in records]
+    return {"scene": spec.scene["name"], "spec": spec.manifest(), "columns": columns(rows), "rows": rows,
+            "cv_threshold_percent": spec.base_scene().pattern.cv_threshold_percent,
+            "widest_width_m": widest_widths(spec, rows),
+            "cells": [{"fertilizer": r["row"]["fertilizer"], "width_m": r["row"]["width_m"],
+                       **{k: v for k, v in r["detail"].items() if k not in ("trays", "cv_curve")}} for r in records],
+            "notes": notes}
+
+
+def write_chart(store: ChartStore, records: list[dict], notes: list[str]) -> tuple[list[Path], dict]:
+    """chart.csv, chart.json, chart.md and chart.png in the store's folder; (files, chart.json's payload)."""
+    spec, out = store.spec, store.out
+    payload = chart_payload(spec, records, notes)
+    rows, cols = payload["rows"], payload["columns"]
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=cols, lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: ("" if row.get(k) is None else row[k]) for k in cols})
+    written = [write_atomic(out / "chart.csv", buffer.getvalue()),
+               write_atomic(out / "chart.json", json_text(payload)),
+               write_atomic(out / "chart.md", markdown(spec, payload))]
+    written.append(chart_figure(out / "chart.png", spec, rows, payload["cv_threshold_percent"]))
+    return written, payload
+
+
+def _fmt(value, digits: int = 3) -> str:
+    if value is None:
+        return "-"
+    return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+
+
+def settings_text(row: dict, names: list[str]) -> str:
+    parts = []
+    for name in names:
+        value = row[name]
+        if name == "rpm":
+            parts.append(f"{value:.0f} rpm")
+        elif name.endswith("_deg"):
+            parts.append(f"{name[:-4].replace('_', ' ')} {value:.1f}°")
+        else:
+            parts.append(f"{name.rsplit('_', 1)[0].replace('_', ' ')} {value:.3g} m")
+    return ", ".join(parts)
+
+
+def markdown(spec: ChartSpec, payload: dict) -> str:
+    """Widths down, fertilizers across; each cell the settings and the verified CV ± SE."""
+    rows, threshold = payload["rows"], payload["cv_threshold_percent"]
+    names = [c for c in payload["columns"] if c not in HEAD and c not in TAIL]
+    by_cell = {(r["fertilizer"], r["width_m"]): r for r in rows}
+    lines = [f"# Spreading chart: scene {spec.scene['name']}, {spec.driving} driving", "",
+             f"Settings found by CMA-ES on the {spec.search_model} model ({spec.budget} simulations of "
+             f"{spec.granules} granules per cell), verified with the {spec.verify_model} model "
+             f"({spec.verify_runs} runs of {spec.granules} granules pooled). CV at the working width "
+             f"± its standard error; cells above the {threshold:g} % threshold are marked ✗.", "",
+             "| width | " + " | ".join(spec.fertilizers) + " |",
+             "|---|" + "---|" * len(spec.fertilizers)]
+    for width in spec.widths_m:
+        cells = []
+        for fertilizer in spec.fertilizers:
+            r = by_cell.get((fertilizer, width))
+            if r is None:
+                cells.append("-")
+                continue
+            cv = "no CV" if r["cv_percent"] is None else (
+                f"CV {r['cv_percent']:.1f} ± {_fmt(r['cv_standard_error_percent'], 2)} %")
+            mark = "" if r["cv_percent"] is not None and r["cv_percent"] <= threshold else " ✗"
+            cells.append(f"{settings_text(r, names)}<br>{cv}{mark}")
+        lines.append(f"| {width:g} m | " + " | ".join(cells) + " |")
+    lines += ["", f"Widest width at CV ≤ {threshold:g} %: " + "; ".join(
+        f"{f} {'none of these' if w is None else f'{w:g} m'}" for f, w in payload["widest_width_m"].items()) + "."]
+    lines += [f"- {note}" for note in payload["notes"]]
+    return "\n".join(lines) + "\n"
+
+
+def _figure(figsize):
+    """A figure laid out by hand (constrained layout costs a second per picture)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, dpi=100)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def chart_figure(path: Path, spec: ChartSpec, rows: list[dict], threshold: float) -> Path:
+    """CV at width per fertilizer (± 2 SE), and each setting against width."""
+    names = [c for c in columns(rows) if c not in HEAD and c not in TAIL]
+    panels = 1 + len(names)
+    ncols = min(3, panels)
+    nrows = int(math.ceil(panels / ncols))
+    fig = _figure((4.2 * ncols, 3.3 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.14 / nrows, top=1 - 0.2 / nrows, wspace=0.3, hspace=0.45)
+    for fertilizer in spec.fertilizers:
+        mine = sorted((r for r in rows if r["fertilizer"] == fertilizer), key=lambda r: r["width_m"])
+        widths = np.array([r["width_m"] for r in mine])
+        cv = np.array([np.nan if r["cv_percent"] is None else r["cv_percent"] for r in mine])
+        se = np.array([np.nan if r["cv_standard_error_percent"] is None else r["cv_standard_error_percent"]
+                       for r in mine])
+        axes[0].errorbar(widths, cv, yerr=2.0 * se, marker="o", ms=4, capsize=3, label=fertilizer)
+        for ax, name in zip(axes[1:], names):
+            ax.plot(widths, [r[name] for r in mine], marker="o", ms=4, label=fertilizer)
+    axes[0].axhline(threshold, color="#c0392b", ls="--", lw=1, label=f"{threshold:g} % threshold")
+    axes[0].set_ylabel("verified CV at width (%)")
+    axes[0].set_title("CV at the working width (± 2 SE)")
+    axes[0].legend(fontsize=7)
+    for ax, name in zip(axes[1:], names):
+        ax.set_ylabel(name)
+        ax.set_title(name.replace("_", " "))
+    for ax in axes[:panels]:
+        ax.set_xlabel("working width (m)")
+        ax.grid(True, color="#e5e5e5")
+    for ax in axes[panels:]:
+        ax.set_visible(False)
+    fig.suptitle(f"Spreading chart: scene {spec.scene['name']}, {spec.driving}")
+    fig.savefig(path)
+    return path
+
+
+def cell_figure(store: ChartStore, cell: Cell, record: dict) -> Path:
+    """The verified pattern of one cell: single pass and overlapped, and CV against width."""
+    from spreadgym.spread.pattern import Trays
+    from spreadgym.viz.plots import cv_vs_bout_width, transverse_pattern
+
+    row, detail = record["row"], record["detail"]
+    scene = store.spec.cell_scene(cell)
+    trays = Trays(np.array(detail["trays"]["center_m"]), np.array(detail["trays"]["mass_kg"]),
+                  scene.pattern.tray_width_m)
+    curve = detail["cv_curve"]
+    metrics = SimpleNamespace(
+        cv_percent_at_target=row["cv_percent"], effective_swath_m=row["effective_swath_m"],
+        cv_threshold_percent=scene.pattern.cv_threshold_percent, target_swath_m=cell.width_m, cv_ci_percent=None,
+        curve_bout_width_m=curve["bout_width_m"],
+        curve_cv_percent=[np.nan if v is None else v for v in curve["cv_percent"]])
+    result = SimpleNamespace(trays=trays, scene=scene, metrics=metrics)
+    fig = _figure((11.0, 3.8))
+    left, right = fig.subplots(1, 2)
+    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.13, top=0.84, wspace=0.18)
+    transverse_pattern(left, result)
+    cv_vs_bout_width(right, result)
+    names = [k for k in row if k not in HEAD and k not in TAIL]
+    fig.suptitle(f"{cell.fertilizer} at {cell.width_m:g} m: {settings_text(row, names)} "
+                 f"({detail['verification']['model']}, {detail['verification']['granules']} granules)", fontsize=10)
+    path = store.cell_path(cell, ".png")
+    partial = path.with_name(f".{path.stem}.partial.png")
+    fig.savefig(partial)
+    partial.replace(path)
+    return path

@@ -1,0 +1,164 @@
+"""Running a chart's cells: each cell a Ray task (an embedded local Ray, or a cluster
+joined by address), or one after the other in this process.
+
+Each finished cell is written to the chart folder as it arrives, with its pattern
+picture; a rerun skips the cells already there. Ctrl-C cancels the running tasks and
+stops, keeping every finished cell. The chart files (chart.csv, .json, .md, .png) are
+written only when every cell is done, so nothing half-done reads as a chart.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+from spreadgym.agents.chart import outputs
+from spreadgym.agents.chart.search import run_cell
+from spreadgym.agents.chart.spec import Cell, ChartSpec, make_spec
+from spreadgym.agents.chart.store import ChartStore
+
+from spreadgym.errors import SpreadgymError
+
+ENGINES = ("ray", "local")
+ADDRESS_TIMEOUT_S = 3.0
+WAIT_S = 0.5
+
+
+@dataclass
+class ChartResult:
+    spec: ChartSpec
+    payload: dict  # what chart.json holds
+    files: list[Path]
+    computed: list[str] = field(default_factory=list)  # keys of the cells run this time
+    reused: list[str] = field(default_factory=list)  # keys of the cells found finished
+    wall_s: float = 0.0
+
+
+def check_address(address: str) -> None:
+    """Refuse an address where nothing listens (before Ray spends its own long timeout)."""
+    if address == "auto":
+        return
+    hostport = address.split("://", 1)[-1]
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        raise SpreadgymError(f"--address {address!r}: expected HOST:PORT (or ray://HOST:PORT, or auto)")
+    try:
+        socket.create_connection((host, int(port)), timeout=ADDRESS_TIMEOUT_S).close()
+    except OSError as exc:
+        raise SpreadgymError(f"--address {address}: no Ray cluster reachable there "
+                             f"({exc.strerror or type(exc).__name__})") from None
+
+
+def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
+    """Start an embedded local Ray with `workers` CPUs, or join the cluster at `address`;
+    an already running session (the caller's) is used as it is. True if started here."""
+    import ray
+
+    if ray.is_initialized():
+        return False
+    quiet = {"logging_level": logging.ERROR, "log_to_driver": False}
+    if address:
+        check_address(address)
+        try:
+            ray.init(address=address, **quiet)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            raise SpreadgymError(f"--address {address}: cannot join a Ray cluster there "
+                                 f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+    else:
+        ray.init(num_cpus=workers or os.cpu_count() or 1, include_dashboard=False, **quiet)
+    return True
+
+
+def _run_ray(spec: ChartSpec, todo: Sequence[Cell], workers: Optional[int], address: Optional[str],
+             finish: Callable[[Cell, dict], None]) -> None:
+    import ray
+
+    started_here = connect_ray(workers, address)
+    pending: dict = {}
+    try:
+        task = ray.remote(num_cpus=1)(run_cell)
+        spec_ref = ray.put(spec)
+        pending = {task.remote(spec_ref, cell): cell for cell in todo}
+        while pending:  # short waits, so Ctrl-C is seen at once
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)
+            for ref in ready:
+                finish(pending.pop(ref), ray.get(ref))
+    finally:
+        for ref in pending:  # interrupted or failed: stop what is still running
+            ray.cancel(ref, force=True)
+        if started_here:
+            ray.shutdown()
+
+
+def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional[int] = None,
+              address: Optional[str] = None, notes: Sequence[str] = (), progress: bool = True,
+              on_cell: Optional[Callable[[Cell, dict], None]] = None) -> ChartResult:
+    """Run (or resume) the chart of `spec` in folder `out` and write its files.
+
+    engine "ray": cells are Ray tasks (local Ray with `workers` CPUs, default all, or
+    the cluster at `address`); "local": one after the other in this process.
+    `on_cell(cell, record)` is called after each finished cell is written.
+    """
+    if engine not in ENGINES:
+        raise SpreadgymError(f"engine {engine!r}; allowed: {', '.join(ENGINES)}")
+    if workers is not None and workers < 1:
+        raise SpreadgymError(f"--workers: {workers} must be at least 1")
+    if address and engine != "ray":
+        raise SpreadgymError("--address needs the ray engine")
+    if address:
+        check_address(address)  # before the folder is claimed
+    started = time.perf_counter()
+    store = ChartStore(out, spec)
+    store.open()
+    records = store.finished()
+    reused = list(records)
+    todo = [c for c in spec.cells if c.key not in records]
+    computed: list[str] = []
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(spec.cells), initial=len(records), desc="chart", unit="cell", file=sys.stderr,
+               disable=None if progress else True, leave=False, dynamic_ncols=True)
+
+    def finish(cell: Cell, record: dict) -> None:
+        store.save(cell, record)
+        outputs.cell_figure(store, cell, record)
+        records[cell.key] = record
+        computed.append(cell.key)
+        bar.update()
+        if on_cell:
+            on_cell(cell, record)
+
+    try:
+        if todo and engine == "ray":
+            _run_ray(spec, todo, workers, address, finish)
+        else:
+            for cell in todo:
+                finish(cell, run_cell(spec, cell))
+    finally:
+        bar.close()
+    ordered = [records[c.key] for c in spec.cells]
+    for cell, record in zip(spec.cells, ordered):
+        if not store.cell_path(cell, ".png").is_file():  # interrupted between a cell's JSON and its picture
+            outputs.cell_figure(store, cell, record)
+    files, payload = outputs.write_chart(store, ordered, list(notes))
+    return ChartResult(spec, payload, files, computed, reused, time.perf_counter() - started)
+
+
+def chart(scene: str, fertilizers, widths, out: Path, driving: Optional[str] = None, budget: int = 200,
+          granules: Optional[int] = None, seed: int = 0, workers: Optional[int] = None,
+          address: Optional[str] = None, engine: str = "ray", progress: bool = True,
+          on_cell: Optional[Callable[[Cell, dict], None]] = None, **spec_options) -> ChartResult:
+    """The spreading chart of `scene` for `fertilizers` (names, a comma list or "all") at
+    `widths` (metres, "W1,W2" or "LO:HI:STEP"), in folder `out`: what `spreadgym chart`
+    runs. `spec_options` go to `make_spec` (search_model, verify_model, verify_runs,
+    settings ranges)."""
+    spec, notes = make_spec(scene, fertilizers, widths, driving=driving, budget=budget, granules=granules,
+                            seed=seed, **spec_options)
+    return run_chart(spec, out, engine=engine, workers=workers, address=address, notes=notes,
+                     progress=progress, on_cell=on_cell)

@@ -1,0 +1,203 @@
+"""What a chart is: the scene, the fertilizer x width cells and everything that decides
+their results, checked before any work starts.
+
+A cell's result depends only on the `ChartSpec` (never on the workers or the order the
+cells run in): its seeds come from the base seed and the cell's key (`cell_seed`).
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import asdict, dataclass
+from typing import Optional
+
+import numpy as np
+
+from spreadgym.config.materials import MaterialLibrary, load_library
+from spreadgym.config.scene import Scene, load_scene, scene_from_dict, scene_with
+from spreadgym.config.settings import SettingsSpace
+from spreadgym.errors import ConfigError, MaterialError, SpreadgymError
+from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.physics.selection import MODELS
+from spreadgym.spread.pipeline import run_scene
+
+SEARCH_MODEL = "auto"  # the fast default objective
+VERIFY_MODEL = "pymunk"  # the full model every chart cell is verified with
+VERIFY_RUNS = 8  # independent runs pooled for the verification (x the granules of one run)
+PROBE_GRANULES = 256  # per probe of the reach check
+PROBE_MODEL = "analytic"
+MAX_PROBES = 32
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One fertilizer at one working width."""
+
+    fertilizer: str
+    width_m: float
+
+    @property
+    def key(self) -> str:
+        """File-name-safe and unique: the width in millimetres."""
+        return f"{self.fertilizer}_{int(round(self.width_m * 1000)):06d}mm"
+
+
+@dataclass(frozen=True)
+class ChartSpec:
+    """Everything a chart's rows depend on (the manifest of a chart folder)."""
+
+    scene: dict  # the validated base scene, dumped (so a changed scene file is noticed)
+    fertilizers: tuple[str, ...]
+    widths_m: tuple[float, ...]
+    driving: str
+    budget: int
+    granules: int  # per simulation, search and verification runs alike
+    seed: int
+    search_model: str = SEARCH_MODEL
+    verify_model: str = VERIFY_MODEL
+    verify_runs: int = VERIFY_RUNS
+    settings: Optional[dict] = None  # keyword arguments of SettingsSpace beyond the scene (ranges)
+
+    @property
+    def cells(self) -> list[Cell]:
+        return [Cell(f, w) for f in self.fertilizers for w in self.widths_m]
+
+    def manifest(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+    def base_scene(self) -> Scene:
+        return scene_from_dict(self.scene)
+
+    def cell_scene(self, cell: Cell) -> Scene:
+        """The base scene for one cell: its fertilizer, width, driving and granule count."""
+        return scene_with(self.base_scene(), {"fertilizer": cell.fertilizer, "pattern.target_swath_m": cell.width_m,
+                                              "pattern.driving": self.driving, "sim.granules": self.granules})
+
+    def space(self, scene: Scene) -> SettingsSpace:
+        return SettingsSpace(scene, **(self.settings or {}))
+
+
+def cell_seed(base_seed: int, cell: Cell) -> np.random.SeedSequence:
+    """The seed sequence of a cell: the base seed and the cell's key, nothing else."""
+    return np.random.SeedSequence([int(base_seed), zlib.crc32(cell.key.encode("utf-8"))])
+
+
+def parse_widths(text: str) -> tuple[float, ...]:
+    """`W1,W2,...` or `LO:HI:STEP` (HI included when the steps reach it), in metres."""
+    text = text.strip()
+    try:
+        parts = [float(p) for p in text.split(":" if ":" in text else ",")]
+    except ValueError:
+        parts = []
+    if not parts or (":" in text and len(parts) != 3):
+        raise SpreadgymError(f"--widths {text!r}: expected W1,W2,... or LO:HI:STEP in metres")
+    if ":" in text:
+        lo, hi, step = parts
+        if not all(math.isfinite(v) for v in parts) or step <= 0 or hi < lo:
+            raise SpreadgymError(f"--widths {text}: LO:HI:STEP needs LO <= HI and STEP > 0")
+        count = int(math.floor((hi - lo) / step + 1e-9)) + 1
+        widths = [round(lo + i * step, 9) for i in range(count)]
+    else:
+        widths = parts
+    for w in widths:
+        if not (math.isfinite(w) and 0.0 < w <= 100.0):
+            raise SpreadgymError(f"--widths: {w:g} m is out of range; allowed (0, 100] m")
+    return tuple(dict.fromkeys(widths))
+
+
+def resolve_fertilizers(text_or_names, scene: Scene, library: MaterialLibrary) -> tuple[tuple[str, ...], list[str]]:
+    """(fertilizers, notes). `all` is every library fertilizer whose surface pairs on this
+    scene are measured or set by the scene; a named one must be, or it is an error."""
+    names = text_or_names.split(",") if isinstance(text_or_names, str) else list(text_or_names)
+    names = [n.strip() for n in names if n.strip()]
+    if not names:
+        raise SpreadgymError("--fertilizers: give at least one fertilizer or 'all'")
+    notes = []
+    if names == ["all"]:
+        chosen = []
+        for name in library.fertilizers:
+            try:
+                resolve_contacts(scene_with(scene, {"fertilizer": name}), library)
+                chosen.append(name)
+            except MaterialError as exc:
+                notes.append(f"{name} left out: {exc}")
+        if not chosen:
+            raise SpreadgymError(f"--fertilizers all: no fertilizer has measured pairs on this scene ({notes[0]})")
+        return tuple(chosen), notes
+    for name in names:
+        if name not in library.fertilizers:
+            known = ", ".join(library.fertilizers)
+            raise SpreadgymError(f"--fertilizers: unknown fertilizer {name!r}; known: {known}, all")
+        try:
+            resolve_contacts(scene_with(scene, {"fertilizer": name}), library)
+        except MaterialError as exc:
+            raise SpreadgymError(f"--fertilizers {name}: {exc}") from None
+    return tuple(dict.fromkeys(names)), notes
+
+
+def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, budget: int = 200,
+              granules: Optional[int] = None, seed: int = 0, search_model: str = SEARCH_MODEL,
+              verify_model: str = VERIFY_MODEL, verify_runs: int = VERIFY_RUNS, settings: Optional[dict] = None,
+              library: Optional[MaterialLibrary] = None) -> tuple[ChartSpec, list[str]]:
+    """A checked ChartSpec and notes for people. Every problem is a SpreadgymError naming
+    the flag or key: unknown fertilizer or model, width off the tray grid or beyond what
+    the scene can throw, budget or granules below 1, settings ranges out of bounds."""
+    library = library or load_library()
+    base = load_scene(scene)
+    if int(budget) < 1:
+        raise SpreadgymError(f"--budget: {budget} must be at least 1 simulation")
+    if int(seed) < 0:
+        raise SpreadgymError(f"--seed: {seed} must be >= 0")
+    granules = base.sim.granules if granules is None else int(granules)
+    if not 1 <= granules <= 1_000_000:
+        raise SpreadgymError(f"--granules: {granules} is out of range; allowed [1, 1000000]")
+    for flag, model in (("search model", search_model), ("verification model", verify_model)):
+        if model not in MODELS:
+            raise SpreadgymError(f"{flag}: unknown model {model!r}; allowed: {', '.join(MODELS)}")
+    if int(verify_runs) < 2:
+        raise SpreadgymError(f"verification runs: {verify_runs} must be at least 2")
+    driving = driving or base.pattern.driving
+    if driving not in ("racetrack", "back-and-forth"):
+        raise SpreadgymError(f"--driving: {driving!r}; allowed: racetrack, back-and-forth")
+    names, notes = resolve_fertilizers(fertilizers, base, library)
+    widths_m = parse_widths(widths) if isinstance(widths, str) else tuple(float(w) for w in widths)
+    if not widths_m:
+        raise SpreadgymError("--widths: give at least one width")
+    spec = ChartSpec(base.model_dump(mode="json"), names, tuple(sorted(widths_m)), driving, int(budget), granules,
+                     int(seed), search_model, verify_model, int(verify_runs), settings)
+    for w in spec.widths_m:
+        try:
+            spec.cell_scene(Cell(names[0], w))
+        except ConfigError as exc:
+            if exc.key == "pattern.target_swath_m":
+                raise SpreadgymError(f"--widths: {w:g} m is off the tray grid: widths must be multiples of "
+                                     f"the tray width {base.pattern.tray_width_m:g} m") from None
+            raise
+    space = spec.space(spec.cell_scene(spec.cells[0]))
+    for name in names:
+        reach = widest_pattern_m(spec, space, name, library)
+        too_wide = [w for w in spec.widths_m if w > reach]
+        if too_wide:
+            raise SpreadgymError(f"--widths: {too_wide[0]:g} m is beyond what the scene can throw {name}: the widest "
+                                 f"single-pass pattern within the settings' ranges is {reach:g} m")
+    return spec, notes
+
+
+def widest_pattern_m(spec: ChartSpec, space: SettingsSpace, fertilizer: str, library: MaterialLibrary) -> float:
+    """The widest single-pass pattern (m, edge to edge of the loaded trays) at the top disc
+    speed over the corners of the other settings, on the fast closed-form model.
+
+    Passes at a bout width beyond this leave bare ground between them whatever the
+    settings: no chart cell there can be even."""
+    scene = scene_with(spec.cell_scene(Cell(fertilizer, spec.widths_m[0])),
+                       {"sim.granules": PROBE_GRANULES, "sim.seed": spec.seed})
+    others = space.size - 1
+    corners = np.array(np.meshgrid(*([[-1.0, 1.0]] * others), indexing="ij")).reshape(others, -1).T
+    step = max(1, int(math.ceil(len(corners) / MAX_PROBES)))
+    widest = 0.0
+    for corner in corners[::step]:
+        probe = space.apply(scene, np.concatenate([[1.0], corner]))
+        widest = max(widest, run_scene(probe, model=PROBE_MODEL, library=library, ci=False).trays.pattern_width_m)
+    return widest
+

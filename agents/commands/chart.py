@@ -1,0 +1,54 @@
+"""`spreadgym chart`: a spreading chart, the settings per fertilizer and working width,
+searched on the fast model and verified with the full one; cells run as Ray tasks."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from spreadgym.cli import arguments
+
+DRIVING = ("racetrack", "back-and-forth")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from spreadgym.agents.baselines import DEFAULT_BUDGET
+
+    parser.add_argument("--scene", required=True, metavar="S", help="shipped scene name or a YAML path")
+    parser.add_argument("--fertilizers", required=True, metavar="F1,F2|all",
+                        help="fertilizers, comma separated, or all (every one with measured pairs on the scene)")
+    parser.add_argument("--widths", required=True, metavar="W1,W2,...|LO:HI:STEP",
+                        help="working widths in metres, multiples of the scene's tray width")
+    parser.add_argument("--driving", choices=DRIVING, help="driving pattern (default: the scene's)")
+    parser.add_argument("--budget", type=arguments.COUNT, default=DEFAULT_BUDGET, metavar="N",
+                        help=f"fast-model simulations per cell for the search (default {DEFAULT_BUDGET})")
+    parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
+                        help="granules per simulation, search and verification runs alike (default: the scene's)")
+    parser.add_argument("--seed", type=arguments.SEED, default=0,
+                        help="base seed; each cell's seeds derive from it and the cell (default 0)")
+    parser.add_argument("--workers", type=arguments.COUNT, metavar="N",
+                        help=f"CPUs of the embedded local Ray (default: all, {os.cpu_count()} here)")
+    parser.add_argument("--address", metavar="ADDR",
+                        help="join the Ray cluster at ADDR (HOST:PORT, ray://HOST:PORT or auto) instead")
+    parser.add_argument("--out", type=arguments.output_folder, default=Path("out/chart"), metavar="DIR",
+                        help="chart folder; rerunning the same command resumes it (default out/chart)")
+    parser.add_argument("--json", action="store_true", help="print chart.json on stdout")
+
+
+def run(args: argparse.Namespace) -> int:
+    from spreadgym.agents.chart import chart
+    from spreadgym.agents.chart.outputs import markdown
+
+    from spreadgym.report import print_json
+
+    result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving, budget=args.budget,
+                   granules=args.granules, seed=args.seed, workers=args.workers, address=args.address)
+    if args.json:
+        print_json(result.payload)
+        return 0
+    print(markdown(result.spec, result.payload), end="")
+    print(f"\n{len(result.computed)} cell(s) computed, {len(result.reused)} reused; elapsed {result.wall_s:.0f} s")
+    for path in result.files:
+        print(f"wrote {path}")
+    return 0

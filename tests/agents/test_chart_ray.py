@@ -1,0 +1,55 @@
+"""spreadgym chart on Ray: the command end to end on an embedded 2-CPU Ray, and the same
+chart, row for row, in this process and on a three-node cluster (one machine)."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+import ray
+from spreadgym.agents.chart import make_spec, run_chart
+from spreadgym.agents.chart.search import run_cell
+
+SMALL = dict(budget=6, granules=64, search_model="analytic", verify_runs=2)
+
+
+def without_wall(rows):
+    return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+
+
+def test_cli_end_to_end_on_an_embedded_two_cpu_ray(tmp_path):
+    out = tmp_path / "chart"
+    argv = [sys.executable, "-m", "spreadgym.cli.main", "chart", "--scene", "paper", "--fertilizers",
+            "compound-10-16-10", "--widths", "3,4", "--budget", "1", "--granules", "64", "--workers", "2",
+            "--out", str(out), "--json"]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    payload = json.loads(proc.stdout)
+    assert [(r["fertilizer"], r["width_m"]) for r in payload["rows"]] == [("compound-10-16-10", 3.0),
+                                                                          ("compound-10-16-10", 4.0)]
+    assert all(c["verification"]["model"] == "pymunk" for c in payload["cells"])
+    assert all(r["cv_percent"] is not None for r in payload["rows"])
+    assert {p.name for p in out.iterdir()} >= {"chart.csv", "chart.json", "chart.md", "chart.png", "manifest.json"}
+    assert json.loads((out / "chart.json").read_text(encoding="utf-8")) == payload
+    # The same seed gives the same cell in this process, one cell at a time, as on two Ray workers.
+    spec = make_spec("paper", "compound-10-16-10", "3,4", budget=1, granules=64)[0]
+    again = run_cell(spec, spec.cells[1])["row"]
+    assert without_wall([again]) == without_wall(payload["rows"][1:])
+
+
+@pytest.mark.slow  # three Ray nodes take about 15 s to start
+def test_same_chart_in_process_and_on_a_three_node_cluster(tmp_path):
+    from ray.cluster_utils import Cluster
+
+    spec = make_spec("paper", "compound-10-16-10,pellet", "3,4", **SMALL)[0]
+    local = run_chart(spec, tmp_path / "local", engine="local", progress=False)
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    try:
+        for _ in range(2):
+            cluster.add_node(num_cpus=1)
+        remote = run_chart(spec, tmp_path / "cluster", address=cluster.address, progress=False)  # joins it
+        assert not ray.is_initialized()  # left as found: the chart disconnected
+    finally:
+        ray.shutdown()
+        cluster.shutdown()
+    assert without_wall(remote.payload["rows"]) == without_wall(local.payload["rows"])
