@@ -10,7 +10,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from spreadgym.physics.granules import GranuleBatch, rotate
-from spreadgym.physics.analytic.spinner import catch_granules, simulate_analytic
+from spreadgym.physics.analytic.catch import catch_granules
+from spreadgym.physics.analytic.spinner import simulate_analytic
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK
 from spreadgym.config.scene import load_scene
 from test_vane_slide import ATOL, G, RTOL, _zx, reference_on_vane, vane_vectors
