@@ -60,6 +60,14 @@ def crossing_fraction(p0: np.ndarray, p1: np.ndarray, radius: float) -> np.ndarr
     return np.clip(root, 0.0, 1.0)
 
 
+def point_segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from points (..., 2) to the segments a-b (..., 2); everything broadcasts."""
+    d = b - a
+    length2 = np.sum(d * d, axis=-1)
+    t = np.clip(np.sum((points - a) * d, axis=-1) / np.maximum(length2, 1e-300), 0.0, 1.0)
+    return np.hypot(*(points - a - t[..., None] * d).T)
+
+
 def zone_radius_m(plates: Sequence[Deflector], max_granule_radius_m: float) -> float:
     """Radius of the circle about the axis that holds every plate with clearance."""
     reach = 0.0

@@ -18,10 +18,16 @@ import pymunk
 import pymunk.batch as batch
 
 from spreadgym.config.scene import Deflector
+from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.departure import Departure
-from spreadgym.physics.geometry import ZONE_MARGIN_M, advance_to_circle, crossing_fraction, zone_radius_m
-from spreadgym.physics.vertical import GRAVITY_M_S2
+from spreadgym.physics.geometry import (
+    ZONE_MARGIN_M,
+    advance_to_circle,
+    crossing_fraction,
+    point_segment_distance,
+    zone_radius_m,
+)
 
 GRANULES_PER_SPACE = 100
 TUNNEL_SAFETY = 0.5
@@ -105,15 +111,9 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, a: np.ndarray, b: np.ndarra
     """Shortest distance (N,) between segments p0[i]-p1[i] and the fixed segment a-b."""
     d = p1 - p0
     e = b - a
-
-    def point_to_segment(q, start, direction):
-        length2 = np.sum(direction * direction, axis=-1)
-        t = np.clip(np.sum((q - start) * direction, axis=-1) / np.maximum(length2, 1e-300), 0.0, 1.0)
-        return np.hypot(*(q - start - t[..., None] * direction).T)
-
     ends = np.minimum(
-        np.minimum(point_to_segment(p0, a, e), point_to_segment(p1, a, e)),
-        np.minimum(point_to_segment(a, p0, d), point_to_segment(b, p0, d)),
+        np.minimum(point_segment_distance(p0, a, b), point_segment_distance(p1, a, b)),
+        np.minimum(point_segment_distance(a, p0, p1), point_segment_distance(b, p0, p1)),
     )
     cross = lambda u, v: u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]  # noqa: E731
     denom = cross(d, e)
@@ -138,7 +138,7 @@ def _run_group(group, plates, contacts, radius_m, mass_kg, rotation, zone, dt,
     objects, ids = {}, []
     for i in group:
         m, r = float(mass_kg[i]), float(radius_m[i])
-        body = pymunk.Body(m, math.inf if rotation == "locked" else 0.4 * m * r * r)
+        body = pymunk.Body(m, math.inf if rotation == "locked" else SPHERE_INERTIA_FACTOR * m * r * r)
         body.position, body.velocity = tuple(position[i]), tuple(velocity[i])
         body.angular_velocity = float(spin[i])
         shape = pymunk.Circle(body, r)
