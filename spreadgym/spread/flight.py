@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+from scipy.integrate import solve_ivp
 
 from spreadgym.config.scene import Flight
 from spreadgym.errors import ConfigError
@@ -324,7 +325,6 @@ def reference_landing(
 ) -> Landing:
     """The same model solved one granule at a time with scipy's DOP853 and a
     terminal event at z = 0: slow, for tests and benchmarks."""
-    from scipy.integrate import solve_ivp
 
     pos, height, vel, diameter, density = _check_inputs(
         position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2

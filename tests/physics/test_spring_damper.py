@@ -5,16 +5,17 @@ import math
 
 import numpy as np
 import pytest
+from test_pymunk_spinner import exact_sliding_departure_speed, large_disc
 
-from spreadgym.physics.calibration import critical_time_step, spring_dashpot
+from spreadgym.config.materials import load_library
+from spreadgym.config.scene import load_scene
 from spreadgym.errors import ConfigError, MaterialError
+from spreadgym.physics.calibration import critical_time_step, spring_dashpot
+from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.physics.departure import DEPARTED
 from spreadgym.physics.stepped import spring_damper as sd
 from spreadgym.physics.stepped import vane_contact as vc
-from spreadgym.physics.departure import DEPARTED
 from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
-from spreadgym.config.scene import load_scene
-
-from test_pymunk_spinner import exact_sliding_departure_speed, large_disc
 
 
 @pytest.mark.parametrize("rpm, pitch_deg, vane_friction", [(500, 0.0, 0.3), (800, -30.0, 0.6), (1100, 30.0, 0.0)])
@@ -48,8 +49,6 @@ def vane_impact(rotation="free", rpm=500.0, at_radius_m=0.1):
 
     Returns (normal rebound ratio relative to the vane surface, contact duration (s),
     the pair's e and t_c)."""
-    from spreadgym.physics.contacts import resolve_contacts
-    from spreadgym.config.materials import load_library
 
     scene = load_scene("paper", {"granule.rotation": rotation, "spinner.rpm": rpm, "contact.disc_friction": 0.0})
     contacts = resolve_contacts(scene, load_library())

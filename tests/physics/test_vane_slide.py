@@ -9,10 +9,11 @@ torque; it integrates with DOP853 at rtol 1e-11 and switches phase on events.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+from scipy.integrate import IntegrationWarning, quad, solve_ivp
 
 from spreadgym.physics.analytic import vane_slide as vs
 from spreadgym.physics.analytic.motions import Face, LinearMotion, normal_force, slide_coefficients, stick_coefficients
@@ -141,7 +142,8 @@ def reference_on_vane(omega, p, u, n, h, r, R, s_tip, mu_v, mu_d_on_disc, rotati
 
             v_away = float(y0[2:] @ n)
 
-            def ev_face(t_, y):  # after a rebound gap / t: the gap starts at 0, the re-catch is its next zero
+            # after a rebound gap / t: the gap starts at 0, the re-catch is its next zero
+            def ev_face(t_, y, v_away=v_away):
                 gap = float((y[:2] - p) @ n) - h
                 if v_away <= 0.0:
                     return gap
@@ -642,9 +644,6 @@ def test_rebound_threshold_is_converged(stop):
 
 def _drag_quadrature(W0, B, s):
     """-int_0^s W/|W| and -int_0^s (s - t) W/|W| by adaptive quadrature (a_d = 1)."""
-    import warnings
-
-    from scipy.integrate import IntegrationWarning, quad
 
     def unit(t, k):
         W = W0 + t * B
