@@ -52,12 +52,15 @@ def machine_frame_tracks(points, end_points, start_angle) -> list[np.ndarray]:
 
 def crossing_fraction(p0: np.ndarray, p1: np.ndarray, radius: float) -> np.ndarray:
     """Fraction f in [0, 1] of the step at which |p0 + f (p1 - p0)| = radius."""
-    d = p1 - p0
-    a = np.sum(d * d, axis=1)
-    b = 2.0 * np.sum(p0 * d, axis=1)
-    c = np.sum(p0 * p0, axis=1) - radius * radius
-    root = (-b + np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))) / np.maximum(2.0 * a, 1e-300)
-    return np.clip(root, 0.0, 1.0)
+    return np.clip(advance_to_circle(p0, p1 - p0, radius), 0.0, 1.0)
+
+
+def point_segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from points (..., 2) to the segments a-b (..., 2); everything broadcasts."""
+    d = b - a
+    length2 = np.sum(d * d, axis=-1)
+    t = np.clip(np.sum((points - a) * d, axis=-1) / np.maximum(length2, 1e-300), 0.0, 1.0)
+    return np.hypot(*(points - a - t[..., None] * d).T)
 
 
 def zone_radius_m(plates: Sequence[Deflector], max_granule_radius_m: float) -> float:

@@ -1,26 +1,95 @@
-"""Which spinner model a scene gets: the cheapest one that is exact enough for it.
+"""The spinner models and deflector methods by name, and which model a scene gets.
 
-`compiled` integrates the full model's contact laws granule by granule (numba), about
-200 times faster than `pymunk` and as fast as the closed forms. Measured against the
-converged full model on the reference family (docs/bench/references, docs/fidelity.md):
-the CV at the target within 0.5 pp on every scene, the effective swath equal on all but
-one (a tray off where the CV curve runs along the threshold), the departure-azimuth
-histograms within a total variation of 0.05 and the median time on the spinner within
-3 %. So `auto` takes `compiled` for every scene inside the envelope that measurement
-covers (`VALIDATED`), and the full `pymunk` model outside it, saying why.
+`SPINNER_MODELS` maps a model name to its runner and to the deflector method that
+carries its departures past the plates; adding a model is one entry. A runner is named
+"module:function" and imported only when that model runs (the compiled model loads
+numba, which costs seconds; listing the models loads none of them). Every runner takes
+(scene, granules, contacts) and returns a `Departure`; stepped runners also take
+`progress` (called with the simulated time, s) and `track_count` (paths kept for plots).
 
-`analytic` (closed forms; exact for its own assumptions, no bounces on the disc, disc
+`auto` takes the cheapest model that is exact enough. `compiled` integrates the full
+model's contact laws granule by granule (numba), about 200 times faster than `pymunk`
+and as fast as the closed forms. Measured against the converged full model on the
+reference family and the edges of the environments' action ranges (docs/fidelity.md):
+the CV at the target within 0.5 pp on every scene (forward-pitched vanes read ~0.5 pp
+low, inside two standard errors), the effective swath equal on all but one scene (a
+tray off where the CV curve runs along the threshold). So `auto` takes `compiled` for
+every scene inside the envelope that measurement covers (`VALIDATED`), and the full
+`pymunk` model outside it, saying why.
+
+`analytic` (closed forms; exact for its own assumptions: no bounces on the disc, disc
 drag to first order) departs from the full model by 1-9 pp in CV on that family, so it
-is used only when asked for, as is `spring-damper` (the paper's contact model with the
-measured contact time, never cheaper than pymunk).
+runs only when asked for, as does `spring-damper` (the seed paper's contact model with
+the measured contact time, never cheaper than pymunk).
 """
 
 from __future__ import annotations
 
+import importlib
+from dataclasses import dataclass
+from typing import Callable, Optional
+
 from spreadgym.config.scene import Scene
 from spreadgym.errors import ConfigError
+from spreadgym.physics.analytic.deflector_rays import deflect
+from spreadgym.physics.contacts import Contacts
+from spreadgym.physics.departure import Departure
+from spreadgym.physics.granules import GranuleBatch
+from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk
 
-MODELS = ("auto", "analytic", "pymunk", "spring-damper", "compiled")
+
+def _deflect_by_rays(departure: Departure, scene: Scene, contacts: Contacts, granules: GranuleBatch) -> Departure:
+    return deflect(departure, scene.deflectors, contacts.deflectors, granules.radius_m, scene.granule.rotation)
+
+
+def _deflect_in_pymunk(departure: Departure, scene: Scene, contacts: Contacts, granules: GranuleBatch) -> Departure:
+    return deflect_pymunk(departure, scene.deflectors, contacts.deflectors, granules.radius_m, granules.mass_kg,
+                          scene.granule.rotation)
+
+
+DEFLECTOR_METHODS: dict[str, Callable[[Departure, Scene, Contacts, GranuleBatch], Departure]] = {
+    "rays": _deflect_by_rays,  # exact plan-view reflections (closed form)
+    "pymunk": _deflect_in_pymunk,  # plates stepped in pymunk, with the spinner model's contact laws
+}
+"""Deflector method name -> function(departure, scene, contacts, granules) giving the launch state."""
+
+
+@dataclass(frozen=True)
+class SpinnerModel:
+    """One spinner model: how to run it and what it serves."""
+
+    name: str
+    runner: str  # "module:function"
+    deflector: str  # key of DEFLECTOR_METHODS
+    serves: str  # what it is exact or meant for
+    stepped: bool = True  # the runner takes progress= and track_count=
+
+    def run(self, scene: Scene, granules: GranuleBatch, contacts: Contacts,
+            progress: Optional[Callable[[float], None]] = None, tracks: int = 0) -> Departure:
+        """Departure states of `granules` (`tracks` paths kept by stepped models)."""
+        module, function = self.runner.split(":")
+        simulate = getattr(importlib.import_module(module), function)
+        if not self.stepped:
+            return simulate(scene, granules, contacts)
+        return simulate(scene, granules, contacts, progress=progress, track_count=tracks)
+
+    def deflect(self, departure: Departure, scene: Scene, contacts: Contacts, granules: GranuleBatch) -> Departure:
+        """States at the edge of the deflector zone, by this model's deflector method."""
+        return DEFLECTOR_METHODS[self.deflector](departure, scene, contacts, granules)
+
+
+SPINNER_MODELS: dict[str, SpinnerModel] = {m.name: m for m in (
+    SpinnerModel("analytic", "spreadgym.physics.analytic.spinner:simulate_analytic", "rays",
+                 "closed forms; exact without disc bounces (feed not dropping onto the disc)", stepped=False),
+    SpinnerModel("pymunk", "spreadgym.physics.stepped.pymunk_spinner:simulate_pymunk", "pymunk",
+                 "the full model: drop, disc bounces and drag, impulse contacts with the vanes"),
+    SpinnerModel("spring-damper", "spreadgym.physics.stepped.spring_damper:simulate_spring_damper", "pymunk",
+                 "the seed paper's spring-dashpot vane contact with the measured contact time"),
+    SpinnerModel("compiled", "spreadgym.physics.compiled:simulate_compiled", "pymunk",
+                 "the pymunk model's contact laws per granule, event-driven and compiled with numba"),
+)}
+
+MODELS = ("auto", *SPINNER_MODELS)
 
 
 # The envelope the compiled model was measured in against converged pymunk references

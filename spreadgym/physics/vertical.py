@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-GRAVITY_M_S2 = 9.81
+from spreadgym.physics.constants import GRAVITY_M_S2
 
 
 def free_fall_to(height_m: float, drop_height_m: float) -> tuple[float, float]:

@@ -29,9 +29,11 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+from scipy.integrate import solve_ivp
 
 from spreadgym.config.scene import Flight
 from spreadgym.errors import ConfigError
+from spreadgym.physics.constants import GRAVITY_M_S2
 
 # Local error tolerance of the adaptive method, per step and per granule: absolute
 # (m on positions, m/s on velocities) plus relative. Chosen so the landing point
@@ -80,7 +82,7 @@ def drag_constant(diameter_m, density_kg_m3, flight: Flight) -> np.ndarray:
     return 3.0 * flight.air_density_kg_m3 * flight.drag_coefficient / (4.0 * rho * d)
 
 
-def terminal_speed_m_s(diameter_m, density_kg_m3, flight: Flight, gravity_m_s2: float = 9.81):
+def terminal_speed_m_s(diameter_m, density_kg_m3, flight: Flight, gravity_m_s2: float = GRAVITY_M_S2):
     """Terminal fall speed sqrt(g / K) in still air (inf without drag)."""
     k = np.asarray(drag_constant(diameter_m, density_kg_m3, flight), dtype=float)
     with np.errstate(divide="ignore"):
@@ -214,7 +216,7 @@ def fly(
     diameter_m,
     density_kg_m3,
     flight: Flight,
-    gravity_m_s2: float = 9.81,
+    gravity_m_s2: float = GRAVITY_M_S2,
     dt_s: Optional[float] = None,
     *,
     atol: float = DEFAULT_ATOL,
@@ -317,13 +319,12 @@ def reference_landing(
     diameter_m,
     density_kg_m3,
     flight: Flight,
-    gravity_m_s2: float = 9.81,
+    gravity_m_s2: float = GRAVITY_M_S2,
     rtol: float = 1e-10,
     atol: float = 1e-12,
 ) -> Landing:
     """The same model solved one granule at a time with scipy's DOP853 and a
     terminal event at z = 0: slow, for tests and benchmarks."""
-    from scipy.integrate import solve_ivp
 
     pos, height, vel, diameter, density = _check_inputs(
         position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2

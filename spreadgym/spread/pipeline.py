@@ -14,15 +14,10 @@ import numpy as np
 
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Scene
-from spreadgym.physics.analytic.deflector_rays import deflect
-from spreadgym.physics.analytic.spinner import simulate_analytic
 from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import GranuleBatch, sample_granules
-from spreadgym.physics.selection import choose_model
-from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk
-from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
-from spreadgym.physics.stepped.spring_damper import simulate_spring_damper
+from spreadgym.physics.selection import SPINNER_MODELS, choose_model
 from spreadgym.spread import estimate, pattern
 from spreadgym.spread import flight as flight_model
 from spreadgym.spread.metrics import RunMetrics
@@ -49,17 +44,7 @@ def run_spinner(
     tracks: int = 0,
 ) -> Departure:
     """Departure states from the chosen spinner model (`tracks` paths kept for plots)."""
-    if model == "analytic":
-        return simulate_analytic(scene, granules, contacts)
-    if model == "pymunk":
-        return simulate_pymunk(scene, granules, contacts, progress=progress, track_count=tracks)
-    if model == "spring-damper":
-        return simulate_spring_damper(scene, granules, contacts, progress=progress, track_count=tracks)
-    if model == "compiled":
-        from spreadgym.physics.compiled import simulate_compiled  # numba loads only when asked for
-
-        return simulate_compiled(scene, granules, contacts, progress=progress, track_count=tracks)
-    raise AssertionError(f"model {model!r} has no runner")  # choose_model validated it
+    return SPINNER_MODELS[model].run(scene, granules, contacts, progress, tracks)
 
 
 def run_scene(
@@ -84,13 +69,7 @@ def run_scene(
     granules = sample_granules(scene, fertilizer, scene.sim.replicates, first_replicate)
 
     departure = run_spinner(scene, granules, contacts, chosen, progress, tracks)
-    if chosen == "analytic":  # exact rays; the stepped models keep plates in pymunk
-        launch = deflect(departure, scene.deflectors, contacts.deflectors, granules.radius_m, scene.granule.rotation)
-    else:
-        launch = deflect_pymunk(
-            departure, scene.deflectors, contacts.deflectors, granules.radius_m, granules.mass_kg,
-            scene.granule.rotation,
-        )
+    launch = SPINNER_MODELS[chosen].deflect(departure, scene, contacts, granules)
     flying = launch.departed
     velocity3 = np.column_stack([launch.velocity_m_s[flying], launch.vertical_velocity_m_s[flying]])
     height = np.maximum(scene.spinner.height_m + launch.height_m[flying], 0.0)

@@ -37,7 +37,8 @@ import numpy as np
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import RPM_TO_RAD_S, Scene, load_scene
 from spreadgym.errors import SpreadgymError
-from spreadgym.physics.analytic.vane_slide import run_along_vane
+from spreadgym.physics.analytic.motions import Face
+from spreadgym.physics.analytic.vane_slide import CatchState, FaceFriction, VaneOptions, run_along_vane
 from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import sample_granules
@@ -225,8 +226,8 @@ def closed_form_departure(
     w = half_thickness_m + granule_radius_m
     x0 = math.sqrt(max(release_radius_m**2 - w * w, inner_radius_m**2))
     x_tip = radius  # radial vane to the rim: the centre line reaches the rim first
-    run = run_along_vane(omega, x0, 0.0, w, inner_radius_m, x_tip, radius, vane_friction, disc_friction,
-                         granule_radius_m, rotation=rotation)
+    run = run_along_vane(Face(omega, w, inner_radius_m, x_tip, radius), CatchState(x0, 0.0, granule_radius_m),
+                         FaceFriction(vane_friction, disc_friction), VaneOptions(rotation=rotation))
     speed = np.hypot(run.vel_u, run.vel_n)
     r = np.hypot(run.pos_u, run.pos_n)
     radial = (run.vel_u * run.pos_u + run.vel_n * run.pos_n) / r

@@ -12,7 +12,7 @@ a. pymunk tunnelling: Chipmunk has no continuous collision detection. A vane tha
 b. spring-damper blow-up: the explicit contact is stable only below
    (2 / omega_n)(sqrt(1 + zeta^2) - zeta). The paper's printed Table 3 stiffnesses
    with the granule masses, impact by impact, with the model's own scheme
-   (`physics.spring_damper.impact_rebound`). Guard: `choose_spring_damper_step`.
+   (`physics.stepped.spring_damper.impact_rebound`). Guard: `choose_spring_damper_step`.
 c. disc-friction chatter: a Coulomb impulse of mu g dt applied in full reverses a
    relative velocity smaller than itself, so a granule that should stick on the disc
    rattles. Guard: `friction_velocity_change(..., limit_to_sticking=True)`.

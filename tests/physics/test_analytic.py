@@ -8,12 +8,15 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from test_vane_slide import ATOL, RTOL, G, _zx, reference_on_vane, vane_vectors
 
-from spreadgym.physics.granules import GranuleBatch, rotate
-from spreadgym.physics.analytic.spinner import catch_granules, simulate_analytic
-from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK
 from spreadgym.config.scene import load_scene
-from test_vane_slide import ATOL, G, RTOL, _zx, reference_on_vane, vane_vectors
+from spreadgym.physics.analytic.catch import catch_granules
+from spreadgym.physics.analytic.spinner import simulate_analytic
+from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK
+from spreadgym.physics.granules import GranuleBatch, rotate
+from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
+from spreadgym.spread.pipeline import departure_summary
 
 
 def _rot(v, a):
@@ -46,7 +49,7 @@ def reference_granule(scene, contacts, radius, q, phase):
         return np.concatenate([y[2:], mu_d * G * rel / sp if sp > 0 else np.zeros(2)])
 
     events = []
-    for p, u, n in vanes:
+    for p, _u, n in vanes:
         def ev(t, y, p=p, n=n):
             return float((_rot(y[:2], -omega * t) - p) @ n) - h
 
@@ -333,8 +336,6 @@ _PYMUNK_CACHE: dict = {}
 
 def _against_pymunk(rotation, rpm, pitch, restitution, prepare, **analytic_kwargs):
     """(speed ratio - 1, angle difference in deg): analytic against pymunk, same 150 granules."""
-    from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
-    from spreadgym.spread.pipeline import departure_summary
 
     scene = load_scene("paper", {
         "feed.drop_height_m": 0.0, "feed.spread_m": 0.0, "sim.granules": 150, "granule.rotation": rotation,

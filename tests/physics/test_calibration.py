@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from spreadgym.physics import calibration as cal
-from spreadgym.errors import MaterialError, SpreadgymError
 from spreadgym.config.materials import load_library
+from spreadgym.errors import MaterialError, SpreadgymError
+from spreadgym.physics import calibration as cal
 
 G = 9.81
 

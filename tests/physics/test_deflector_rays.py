@@ -7,11 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from spreadgym.physics.contacts import PlateContact
+from spreadgym.config.scene import Deflector
 from spreadgym.physics.analytic.deflector_rays import capsule_hit, deflect
+from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, Departure
 from spreadgym.physics.geometry import zone_radius_m
-from spreadgym.config.scene import Deflector
+from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk
 
 R_GRANULE = 0.0015
 FLOOR = Deflector(x_m=0.0, y_m=-0.3, angle_deg=0.0, length_m=0.6, material="steel")  # along x at y = -0.3
@@ -209,7 +210,6 @@ def test_many_granules_many_plates_no_nan(rotation):
 
 
 def test_agrees_with_the_pymunk_stage():
-    from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk
 
     plate = Deflector(x_m=0.0, y_m=-0.3, angle_deg=10.0, length_m=0.6, material="steel")
     rng = np.random.default_rng(2)

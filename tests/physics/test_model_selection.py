@@ -2,10 +2,10 @@
 
 import pytest
 
+from spreadgym.config.scene import load_scene
 from spreadgym.errors import ConfigError
 from spreadgym.physics.selection import choose_model
 from spreadgym.spread.pipeline import run_scene
-from spreadgym.config.scene import load_scene
 
 
 def test_auto_picks_compiled_inside_the_validated_envelope_and_pymunk_outside():

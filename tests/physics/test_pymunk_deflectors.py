@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
+from spreadgym.config.scene import Deflector
 from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.departure import DEPARTED, Departure
 from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk, segment_distance
-from spreadgym.config.scene import Deflector
 
 
 def one_granule(position, velocity):

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from spreadgym.config.scene import load_scene
 from spreadgym.physics.departure import DEPARTED
 from spreadgym.physics.geometry import vane_segments
 from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
-from spreadgym.config.scene import load_scene
 
 G = 9.81
 

@@ -5,15 +5,17 @@ import math
 
 import numpy as np
 import pytest
-
-from spreadgym.physics.calibration import critical_time_step, spring_dashpot
-from spreadgym.errors import ConfigError, MaterialError
-from spreadgym.physics.stepped import spring_damper as sd
-from spreadgym.physics.departure import DEPARTED
-from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
-from spreadgym.config.scene import load_scene
-
 from test_pymunk_spinner import exact_sliding_departure_speed, large_disc
+
+from spreadgym.config.materials import load_library
+from spreadgym.config.scene import load_scene
+from spreadgym.errors import ConfigError, MaterialError
+from spreadgym.physics.calibration import critical_time_step, spring_dashpot
+from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.physics.departure import DEPARTED
+from spreadgym.physics.stepped import spring_damper as sd
+from spreadgym.physics.stepped import vane_contact as vc
+from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
 
 
 @pytest.mark.parametrize("rpm, pitch_deg, vane_friction", [(500, 0.0, 0.3), (800, -30.0, 0.6), (1100, 30.0, 0.0)])
@@ -26,29 +28,42 @@ def test_locked_granule_departs_at_the_exact_sliding_speed(prepare, rpm, pitch_d
     assert departure.speed_m_s.mean() == pytest.approx(exact, rel=0.01)
 
 
+def vane_overlap(law, angle_rad, position_m, reach_m):
+    """Signed overlap of a granule at `position_m` (2,) with its nearest vane: reach - distance (m)."""
+    turn = np.array([[math.cos(angle_rad), -math.sin(angle_rad)], [math.sin(angle_rad), math.cos(angle_rad)]])
+    inner, direction = law.inner_m @ turn.T, law.direction @ turn.T
+    along = np.clip(np.sum((position_m - inner) * direction, axis=1), 0.0, law.length_m)
+    return reach_m - np.min(np.hypot(*(position_m - inner - along[:, None] * direction).T))
+
+
+def amplification_per_step(k, c, mass, dt):
+    """Spectral radius of one semi-implicit Euler step of m x'' + c x' + k x = 0 (above 1: the contact grows)."""
+    w2h2, ch = k / mass * dt * dt, c / mass * dt
+    matrix = np.array([[1.0 - w2h2, dt * (1.0 - ch)], [-w2h2 / dt, 1.0 - ch]])
+    return float(np.max(np.abs(np.linalg.eigvals(matrix))))
+
+
 def vane_impact(rotation="free", rpm=500.0, at_radius_m=0.1):
     """One granule at rest on a frictionless disc, hit by radial vane 0 of the paper
     scene, stepped exactly as the model steps (same kernel, same update order).
 
     Returns (normal rebound ratio relative to the vane surface, contact duration (s),
     the pair's e and t_c)."""
-    from spreadgym.physics.contacts import resolve_contacts
-    from spreadgym.config.materials import load_library
 
     scene = load_scene("paper", {"granule.rotation": rotation, "spinner.rpm": rpm, "contact.disc_friction": 0.0})
     contacts = resolve_contacts(scene, load_library())
-    law = sd.VaneContactLaw.for_scene(scene, contacts)
+    law = vc.VaneContactLaw.for_scene(scene, contacts)
     granule_radius = np.array([0.0015])
     dt = sd.choose_spring_damper_step(scene, contacts, float(granule_radius[0])).dt_s
     omega = scene.spinner.omega_rad_s
-    rows = sd.GranuleContactData.build(granule_radius, law.half_thickness_m, rotation == "locked")
+    rows = vc.GranuleContactData.build(granule_radius, law.half_thickness_m, rotation == "locked")
     start = 0.05  # rad ahead of the vane
     x = at_radius_m * np.array([[math.cos(start)], [math.sin(start)]])
     v, s = np.zeros((2, 1)), np.zeros(1)
     t, previous, t_in, vn_in = 0.0, None, None, None
     for _ in range(100_000):
         angle = omega * t
-        overlap = sd.vane_overlap(law, angle, x, rows.reach_m)[0]
+        overlap = vane_overlap(law, angle, x[:, 0], rows.reach_m[0])
         normal = np.array([-math.sin(angle), math.cos(angle)])
         surface = omega * np.array([-x[1, 0], x[0, 0]])
         vn = float((v[:, 0] - surface) @ normal)
@@ -59,8 +74,8 @@ def vane_impact(rotation="free", rpm=500.0, at_radius_m=0.1):
                 t_out = t - dt * overlap / (overlap - previous[0])
                 return -vn / vn_in, t_out - t_in, contacts.vane_restitution, contacts.vane_contact_time_s
         previous = (overlap, vn)
-        dv, dspin, _ = sd.vane_contact_change(law, angle, omega, x, v, s, rows, np.array([True]),
-                                              np.zeros((2, 1)), dt, False)
+        step = vc.ContactStep(angle, omega, np.array([True]), np.zeros((2, 1)), dt)
+        dv, dspin, _ = vc.vane_contact_change(law, step, x, v, s, rows, False)
         v, s = v + dv, s + dspin
         x = x + dt * v
         t += dt
@@ -90,10 +105,10 @@ def test_critical_step_is_the_scheme_s_exact_stability_limit():
     for e, t_c, mass in [(0.43, 2.323e-4, 2.45e-5), (0.525, 1.673e-4, 6.6e-4), (0.9, 1e-4, 1e-6)]:
         contact = spring_dashpot(mass, e, t_c)
         k, c = contact.stiffness_n_per_m, contact.damping_ns_per_m
-        limit = sd.explicit_critical_step_s(e, t_c)
+        limit = vc.explicit_critical_step_s(e, t_c)
         assert limit == pytest.approx(critical_time_step(mass, k, c), rel=1e-12)
-        assert sd.amplification_per_step(k, c, mass, 0.999 * limit) < 1.0
-        assert sd.amplification_per_step(k, c, mass, 1.001 * limit) > 1.0
+        assert amplification_per_step(k, c, mass, 0.999 * limit) < 1.0
+        assert amplification_per_step(k, c, mass, 1.001 * limit) > 1.0
 
 
 def test_agrees_with_the_pymunk_model_on_the_paper_scene(prepare):
@@ -114,14 +129,14 @@ def test_default_step_resolves_the_contact_and_is_reported(prepare):
     t_c = contacts.vane_contact_time_s
     assert departure.model == "spring-damper"
     assert departure.dt_s == pytest.approx(t_c / sd.CONTACT_STEPS)
-    assert departure.dt_s <= 0.5 * sd.explicit_critical_step_s(contacts.vane_restitution, t_c)
+    assert departure.dt_s <= 0.5 * vc.explicit_critical_step_s(contacts.vane_restitution, t_c)
     assert any("time step" in note and "critical" in note for note in departure.notes)
 
 
 def test_hand_set_step_beyond_the_critical_step_is_refused(prepare):
     scene = load_scene("paper", {"sim.granules": 2, "sim.dt_s": 2e-4})
     granules, contacts = prepare(scene)
-    limit = sd.explicit_critical_step_s(contacts.vane_restitution, contacts.vane_contact_time_s)
+    limit = vc.explicit_critical_step_s(contacts.vane_restitution, contacts.vane_contact_time_s)
     with pytest.raises(ConfigError) as info:
         sd.simulate_spring_damper(scene, granules, contacts)
     assert info.value.key == "sim.dt_s"
@@ -137,7 +152,7 @@ def test_hand_set_step_beyond_the_critical_step_is_refused(prepare):
 def test_unchecked_step_past_the_limit_runs_and_shows_the_blow_up(prepare):
     scene = load_scene("paper", {"sim.granules": 32, "feed.spread_m": 0.0})
     granules, contacts = prepare(scene)
-    limit = sd.explicit_critical_step_s(contacts.vane_restitution, contacts.vane_contact_time_s)
+    limit = vc.explicit_critical_step_s(contacts.vane_restitution, contacts.vane_contact_time_s)
     departure = sd.simulate_spring_damper(scene, granules, contacts, dt_s=1.3 * limit, unchecked=True)
     good = sd.simulate_spring_damper(scene, granules, contacts)
     assert np.all(np.isfinite(departure.velocity_m_s))

@@ -9,17 +9,30 @@ torque; it integrates with DOP853 at rtol 1e-11 and switches phase on events.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+from scipy.integrate import IntegrationWarning, quad, solve_ivp
 
 from spreadgym.physics.analytic import vane_slide as vs
+from spreadgym.physics.analytic.motions import Face, LinearMotion, normal_force, slide_coefficients, stick_coefficients
+from spreadgym.physics.analytic.roots import EventFunction
+from spreadgym.physics.analytic.vane_flight import DragLine, FlightStart, fly_off_face
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK
 
 G = 9.81
 KAPPA = 0.4
 RTOL, ATOL = 1e-11, 1e-15
+
+_START_KEYS = ("spin_offset0", "approach_speed0", "disc_contact_from_s", "time_limit_s")
+
+
+def run_vane(omega_abs, x0, v0, w, x_in, x_tip, R, mu_v, mu_d, r, restitution=0.0, **kw):
+    """vs.run_along_vane from plain arguments (keywords: CatchState's and VaneOptions' fields)."""
+    start = {k: kw.pop(k) for k in _START_KEYS if k in kw}
+    return vs.run_along_vane(Face(omega_abs, w, x_in, x_tip, R), vs.CatchState(x0, v0, r, **start),
+                             vs.FaceFriction(mu_v, mu_d, restitution), vs.VaneOptions(**kw))
 
 
 def _cross_z(a, b):
@@ -129,7 +142,8 @@ def reference_on_vane(omega, p, u, n, h, r, R, s_tip, mu_v, mu_d_on_disc, rotati
 
             v_away = float(y0[2:] @ n)
 
-            def ev_face(t_, y):  # after a rebound gap / t: the gap starts at 0, the re-catch is its next zero
+            # after a rebound gap / t: the gap starts at 0, the re-catch is its next zero
+            def ev_face(t_, y, v_away=v_away):
                 gap = float((y[:2] - p) @ n) - h
                 if v_away <= 0.0:
                     return gap
@@ -271,7 +285,7 @@ def run_both(case, spin0=None, phi0=None):
     ref = reference_on_vane(case["omega"], case["p"], case["u"], case["n"], case["h"], case["r"], case["R"],
                             case["s_tip"], case["mu_v"], case["mu_d"], case["rotation"], case["s0"], case["sd0"],
                             spin0=0.0 if spin0 is None else spin0)
-    res = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
+    res = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
                             case["R"], case["mu_v"], case["mu_d"], case["r"], rotation=case["rotation"],
                             spin_offset0=phi0)
     return ref, res
@@ -302,22 +316,21 @@ def _sweep_cases(count, seed):
 @pytest.mark.parametrize("mu", [0.0, 0.2, 0.52, 1.0])
 def test_sliding_roots_are_the_classic_ones(mu):
     om = 80.0
-    l1, l2 = vs.sliding_roots(om, mu)
-    assert l1 == pytest.approx(om * (-mu + math.sqrt(1 + mu * mu)), rel=1e-14)
-    assert l2 == pytest.approx(om * (-mu - math.sqrt(1 + mu * mu)), rel=1e-14)
-    A, B, C = vs.slide_coefficients(om, mu, 0.3, 0.004)
-    mot = vs.LinearMotion.solve(A, B, C, 0.05, 0.3)
+    l1, l2 = om * (-mu + math.sqrt(1 + mu * mu)), om * (-mu - math.sqrt(1 + mu * mu))
+    A, B, C = slide_coefficients(om, mu, 0.3, 0.004)
+    mot = LinearMotion.solve(A, B, C, 0.05, 0.3)
     assert mot.l1 == pytest.approx(l1, rel=1e-13) and mot.l2 == pytest.approx(l2, rel=1e-13)
-    r1, r2 = vs.rolling_roots(om)
-    assert r1 == pytest.approx(om * math.sqrt(5 / 7), rel=1e-14) and r2 == -r1
+    # rolling without slip: roots +-Omega / sqrt(1 + 2/5)
+    roll = LinearMotion.solve(*stick_coefficients(om, 0.3), 0.05, 0.3)
+    assert roll.l1 == pytest.approx(om * math.sqrt(5 / 7), rel=1e-14) and roll.l2 == pytest.approx(-roll.l1, rel=1e-14)
 
 
 @pytest.mark.parametrize("mu_v, mu_d, w", [(0.0, 0.0, 0.004), (0.3, 0.5, 0.004), (0.6, 0.1, -0.008)])
 def test_sliding_closed_form_solves_the_sliding_equation(mu_v, mu_d, w):
     """s'' + 2 mu_v W s' - W^2 s = W^2 (p.u) - mu_d g + mu_v W^2 (c.n), integrated by solve_ivp."""
     om, pu, s0, sd0 = 70.0, 0.025, 0.02, 0.4
-    A, B, C = vs.slide_coefficients(om, mu_v, mu_d, w)
-    mot = vs.LinearMotion.solve(A, B, C, pu + s0, sd0)  # x = s + p.u
+    A, B, C = slide_coefficients(om, mu_v, mu_d, w)
+    mot = LinearMotion.solve(A, B, C, pu + s0, sd0)  # x = s + p.u
 
     def rhs(_, y):
         return [y[1], -2 * mu_v * om * y[1] + om * om * y[0] + om * om * pu - mu_d * G + mu_v * om * om * w]
@@ -327,12 +340,12 @@ def test_sliding_closed_form_solves_the_sliding_equation(mu_v, mu_d, w):
     np.testing.assert_allclose(mot.x(t) - pu, sol.y[0], rtol=1e-9, atol=1e-13)
     np.testing.assert_allclose(mot.v(t), sol.y[1], rtol=1e-9, atol=1e-12)
     # normal force of the closed form
-    np.testing.assert_allclose(vs.normal_force(om, mot.v(t), w), 2 * om * sol.y[1] - om * om * w, rtol=1e-9)
+    np.testing.assert_allclose(normal_force(om, mot.v(t), w), 2 * om * sol.y[1] - om * om * w, rtol=1e-9)
 
 
 def test_slide_and_roll_motion_in_distance_along_the_vane():
     om, pu, w = 60.0, 0.025, 0.004
-    mot = vs.slide_motion(om, 0.4, 0.3, pu, w, 0.02, 0.3)
+    mot = LinearMotion.solve(*slide_coefficients(om, 0.4, 0.3, w), pu + 0.02, 0.3)  # in x = s + p.u
     t = mot.time_to_reach(0.1 + pu)
     assert mot.x(t) - pu == pytest.approx(0.1, rel=1e-13)
 
@@ -341,7 +354,7 @@ def test_slide_and_roll_motion_in_distance_along_the_vane():
 
     sol = solve_ivp(rhs, (0, t), [0.02, 0.3], method="DOP853", rtol=RTOL, atol=ATOL)
     assert sol.y[0, -1] == pytest.approx(0.1, rel=1e-9)
-    roll = vs.roll_motion(om, 0.3, pu, 0.02, 0.3)
+    roll = LinearMotion.solve(*stick_coefficients(om, 0.3), pu + 0.02, 0.3)
     # (1 + 2/5) s'' = W^2 (s + p.u) - mu_d g
     tt = np.array([0.0, 0.01, 0.02])
     np.testing.assert_allclose(1.4 * roll.acceleration(tt), om * om * roll.x(tt) - 0.3 * G, rtol=1e-12)
@@ -349,8 +362,8 @@ def test_slide_and_roll_motion_in_distance_along_the_vane():
 
 def test_time_to_reach_inverts_the_closed_form():
     om = np.array([30.0, 80.0, 115.0, 50.0])
-    A, B, C = vs.slide_coefficients(om, np.array([0.0, 0.3, 0.6, 0.1]), np.array([0.0, 0.5, 0.2, 0.6]), 0.004)
-    mot = vs.LinearMotion.solve(A, B, C, np.array([0.03, 0.04, 0.05, 0.1]), np.array([0.1, 0.2, 0.3, 0.4]))
+    A, B, C = slide_coefficients(om, np.array([0.0, 0.3, 0.6, 0.1]), np.array([0.0, 0.5, 0.2, 0.6]), 0.004)
+    mot = LinearMotion.solve(A, B, C, np.array([0.03, 0.04, 0.05, 0.1]), np.array([0.1, 0.2, 0.3, 0.4]))
     X = np.array([0.15, 0.15, 1.0, 0.2])
     t = mot.time_to_reach(X)
     assert np.all(np.isfinite(t)) and np.all(t > 0)
@@ -361,7 +374,7 @@ def test_first_root_finds_the_first_of_several():
     # F(t) = b0 + b1 t + g1 expm1(l1 t) + g2 expm1(l2 t) with two or three roots
     rng = np.random.default_rng(4)
     n = 300
-    ev = vs.EventFunction(F0=-rng.uniform(0.01, 1, n), b1=rng.uniform(-30, 30, n), g1=rng.uniform(-1, 1, n),
+    ev = EventFunction(F0=-rng.uniform(0.01, 1, n), b1=rng.uniform(-30, 30, n), g1=rng.uniform(-1, 1, n),
                           g2=rng.uniform(-3, 3, n), l1=rng.uniform(1, 10, n), l2=-rng.uniform(1, 10, n))
     T = np.full(n, 1.5)
     t = ev.first_root(T)
@@ -421,7 +434,7 @@ def test_vectorised_run_equals_one_by_one():
     one = [run_both(c)[1] for c in cases]
     rot = "free"
     cases_f = [c for c in cases if c["rotation"] == rot]
-    res = vs.run_along_vane(
+    res = run_vane(
         [abs(c["omega"]) for c in cases_f], [c["x0"] for c in cases_f], [c["sd0"] for c in cases_f],
         [c["w"] for c in cases_f], [c["x_in"] for c in cases_f], [c["x_tip"] for c in cases_f],
         [c["R"] for c in cases_f], [c["mu_v"] for c in cases_f], [c["mu_d"] for c in cases_f],
@@ -473,7 +486,7 @@ def test_short_vane_leaves_at_the_tip_and_flies_straight():
     ref_s_tip = case["x_tip"] - case["x_in"]
     ref = reference_on_vane(case["omega"], case["p"], case["u"], case["n"], case["h"], case["r"], case["R"],
                             ref_s_tip, case["mu_v"], case["mu_d"], "free", case["s0"], case["sd0"])
-    res = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
+    res = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
                             case["R"], case["mu_v"], case["mu_d"], case["r"], rotation="free")
     assert res.left_at_tip[0]
     assert np.hypot(res.pos_u[0], res.pos_n[0]) == pytest.approx(case["R"], rel=1e-12)
@@ -489,14 +502,14 @@ def test_disc_friction_from_landing_like_the_reference(rotation, delay):
     ref = reference_on_vane(case["omega"], case["p"], case["u"], case["n"], case["h"], case["r"], case["R"],
                             case["s_tip"], case["mu_v"], case["mu_d"], rotation, case["s0"], case["sd0"],
                             disc_from=delay)
-    res = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
+    res = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
                             case["R"], case["mu_v"], case["mu_d"], case["r"], rotation=rotation,
                             disc_contact_from_s=delay)
     assert float(np.hypot(res.vel_u[0], res.vel_n[0])) == pytest.approx(departure_speed_ref(case, ref), rel=1e-9)
     assert res.t_s[0] == pytest.approx(ref["t"], rel=1e-9)
-    never = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"],
+    never = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"],
                               case["x_tip"], case["R"], case["mu_v"], 0.0, case["r"], rotation=rotation)
-    late = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
+    late = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
                              case["R"], case["mu_v"], case["mu_d"], case["r"], rotation=rotation,
                              disc_contact_from_s=10.0)
     assert late.t_s[0] == never.t_s[0] and late.vel_u[0] == never.vel_u[0]
@@ -512,7 +525,7 @@ def run_bouncing(case, e, approach=None, flight_drag=False, impact_friction=True
                             case["s_tip"], case["mu_v"], case["mu_d"], case["rotation"], case["s0"], case["sd0"],
                             approach0=a, restitution=e, impact_friction=impact_friction,
                             disc_friction_in_flight=ref_drag, **kw)
-    res = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
+    res = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
                             case["R"], case["mu_v"], case["mu_d"], case["r"], rotation=case["rotation"],
                             approach_speed0=a, restitution=e, impact_friction=impact_friction,
                             flight_drag=flight_drag, **kw)
@@ -550,10 +563,10 @@ def test_restitution_zero_without_impact_friction_is_the_plastic_catch():
     """Defaults of run_along_vane: e = 0, no impact friction: the catch before restitution."""
     for params in SWEEP[:10]:
         case = vane_case(**params)
-        plain = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"],
+        plain = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"],
                                   case["x_tip"], case["R"], case["mu_v"], case["mu_d"], case["r"],
                                   rotation=case["rotation"])
-        struck = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"],
+        struck = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"],
                                    case["x_tip"], case["R"], case["mu_v"], case["mu_d"], case["r"],
                                    rotation=case["rotation"], approach_speed0=abs(case["omega"]) * case["x0"])
         for a, b in ((plain.vel_u, struck.vel_u), (plain.vel_n, struck.vel_n), (plain.t_s, struck.t_s),
@@ -571,7 +584,7 @@ def test_impact_friction_stops_the_slip_at_most():
     a, e, Om, r = abs(case["omega"]) * case["x0"], 0.5, abs(case["omega"]), case["r"]
 
     def one_round(mu_v):
-        return vs.run_along_vane(Om, case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"], case["R"],
+        return run_vane(Om, case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"], case["R"],
                                  mu_v, 0.0, r, rotation="free", approach_speed0=a, restitution=e,
                                  impact_friction=True, max_rounds=1)
 
@@ -606,7 +619,7 @@ def test_flight_drag_to_first_order(rpm, pitch, rotation):
 def test_drag_brings_a_slow_rebound_to_rest():
     """Slow disc: the drag eats the rebound before the face comes back; the disc holds it."""
     case = vane_case(60, 0.0, 0.52, 0.52, 1.0, "free")
-    res = vs.run_along_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
+    res = run_vane(abs(case["omega"]), case["x0"], case["sd0"], case["w"], case["x_in"], case["x_tip"],
                             case["R"], case["mu_v"], case["mu_d"], case["r"], rotation="free",
                             approach_speed0=abs(case["omega"]) * case["x0"], restitution=0.43,
                             impact_friction=True, flight_drag=True)
@@ -631,9 +644,6 @@ def test_rebound_threshold_is_converged(stop):
 
 def _drag_quadrature(W0, B, s):
     """-int_0^s W/|W| and -int_0^s (s - t) W/|W| by adaptive quadrature (a_d = 1)."""
-    import warnings
-
-    from scipy.integrate import IntegrationWarning, quad
 
     def unit(t, k):
         W = W0 + t * B
@@ -650,6 +660,12 @@ def _drag_quadrature(W0, B, s):
     return first + second
 
 
+def drag_offsets(W0u, W0n, Bu, Bn, a_d, s):
+    """DragLine for scalars: (dVu, dVn, dXu, dXn) after a time s of drag."""
+    line = DragLine(*(np.atleast_1d(np.asarray(a, dtype=float)) for a in (W0u, W0n, Bu, Bn, a_d)))
+    return tuple(float(r[0]) for r in line.at(np.atleast_1d(float(s))))
+
+
 def test_drag_line_closed_form_against_quadrature():
     rng = np.random.default_rng(5)
     cases = [(rng.normal(size=2), rng.normal(size=2) * 30, rng.uniform(1e-3, 0.2)) for _ in range(40)]
@@ -661,7 +677,7 @@ def test_drag_line_closed_form_against_quadrature():
         (np.array([0.3, 0.4]), np.array([2.0, -1.0]), 1e-6),  # short: Taylor series
     ]
     for W0, B, s in cases:
-        got = vs._drag_offsets(W0[0], W0[1], B[0], B[1], 1.0, s)
+        got = drag_offsets(W0[0], W0[1], B[0], B[1], 1.0, s)
         want = _drag_quadrature(W0, B, s)
         scale = (s, s, s * s, s * s)
         for g, w_, sc in zip(got, want, scale):
@@ -672,8 +688,8 @@ def test_drag_line_series_and_closed_form_join():
     """Across the switch to the Taylor series (b s = 1e-4 |W0|) the offsets are continuous."""
     W0u, W0n, Bu, Bn = 0.3, 0.4, 2.0, -1.0
     s_switch = 1e-4 * math.hypot(W0u, W0n) / math.hypot(Bu, Bn)
-    below = vs._drag_offsets(W0u, W0n, Bu, Bn, 1.0, s_switch * (1 - 1e-9))
-    above = vs._drag_offsets(W0u, W0n, Bu, Bn, 1.0, s_switch * (1 + 1e-9))
+    below = drag_offsets(W0u, W0n, Bu, Bn, 1.0, s_switch * (1 - 1e-9))
+    above = drag_offsets(W0u, W0n, Bu, Bn, 1.0, s_switch * (1 + 1e-9))
     for lo, hi, p in zip(below, above, (1, 1, 2, 2)):
         assert float(lo) == pytest.approx(float(hi), rel=1e-8, abs=1e-20 * s_switch ** p)
 
@@ -687,8 +703,8 @@ def test_rebound_recatch_is_the_first_root():
     w = rng.uniform(-0.004, 0.012, n)
     v0 = Om * rng.uniform(0.0, 0.05, n)
     vn0 = Om * x0 * rng.uniform(1e-3, 0.6, n)
-    fl = vs._flight(Om, x0, v0, w, np.full(n, 0.15), np.zeros(n), np.full(n, 0.15), vn0=vn0)
-    th = fl["t"] * Om
+    fl = fly_off_face(Face(Om, w, np.zeros(n), np.full(n, 0.15), np.full(n, 0.15)), FlightStart(x0, v0, vn0))
+    th = fl.t * Om
     grid = np.linspace(0, 1, 20001)[1:]
     for i in range(0, n, 20):
         g = th[i] * 1.5 * grid
@@ -696,8 +712,8 @@ def test_rebound_recatch_is_the_first_root():
         d = w[i] * (np.cos(g) - 1) + x0[i] * (g * np.cos(g) - np.sin(g)) + vn0[i] / Om[i] * g * np.cos(g) \
             - k * g * np.sin(g)
         neg = np.nonzero(d <= 0)[0]
-        if fl["event"][i] == 1:
+        if fl.event[i] == 1:
             assert neg.size and abs(g[neg[0]] - th[i]) <= 1.5 * th[i] * (grid[1] - grid[0]) * 1.01
         else:  # left the disc first
-            assert fl["event"][i] == 0
-            assert np.hypot(fl["pu"][i], fl["pn"][i]) == pytest.approx(0.15, rel=1e-12)
+            assert fl.event[i] == 0
+            assert np.hypot(fl.pu[i], fl.pn[i]) == pytest.approx(0.15, rel=1e-12)

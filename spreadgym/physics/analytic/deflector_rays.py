@@ -30,12 +30,11 @@ from typing import Sequence, Union
 import numpy as np
 
 from spreadgym.config.scene import Deflector
+from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.contacts import Contacts, PlateContact
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.geometry import zone_radius_m
 
-GRAVITY_M_S2 = 9.81
-KAPPA_SPHERE = 0.4
 MAX_BOUNCES = 200
 _APPROACH_TOL = 1e-12  # relative normal speed below which a touching granule is not hitting
 
@@ -120,10 +119,10 @@ def bounce(velocity, spin, normal, radius, restitution, friction, rotation):
         stop = np.abs(slip)
     else:
         slip = vt - radius * spin
-        stop = np.abs(slip) / (1.0 + 1.0 / KAPPA_SPHERE)
+        stop = np.abs(slip) / (1.0 + 1.0 / SPHERE_INERTIA_FACTOR)
     jt = -np.sign(slip) * np.minimum(friction * jn, stop)
     new_v = velocity + jn[:, None] * normal + jt[:, None] * tangent
-    new_spin = np.zeros_like(spin) if rotation == "locked" else spin - jt / (KAPPA_SPHERE * radius)
+    new_spin = np.zeros_like(spin) if rotation == "locked" else spin - jt / (SPHERE_INERTIA_FACTOR * radius)
     return new_v, new_spin
 
 

@@ -19,7 +19,7 @@ from spreadgym.physics.contacts import Contacts
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import GranuleBatch, rotate
 from spreadgym.physics.numerics import choose_time_step
-from spreadgym.physics.stepped.pymunk_spinner import MAX_SPINNER_TIME_S, STUCK_SPEED_M_S
+from spreadgym.physics.stepped.finish import MAX_SPINNER_TIME_S, STUCK_SPEED_M_S
 from spreadgym.physics.vertical import free_fall_to
 
 MAX_TRACK_POINTS = 20_000

@@ -11,6 +11,7 @@ plate; the flight starts from there.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -18,10 +19,17 @@ import pymunk
 import pymunk.batch as batch
 
 from spreadgym.config.scene import Deflector
+from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.departure import Departure
-from spreadgym.physics.geometry import ZONE_MARGIN_M, advance_to_circle, crossing_fraction, zone_radius_m
-from spreadgym.physics.vertical import GRAVITY_M_S2
+from spreadgym.physics.geometry import (
+    ZONE_MARGIN_M,
+    advance_to_circle,
+    crossing_fraction,
+    point_segment_distance,
+    zone_radius_m,
+)
+from spreadgym.physics.stepped.pymunk_spinner import COLLISION_SLOP_M
 
 GRANULES_PER_SPACE = 100
 TUNNEL_SAFETY = 0.5
@@ -78,9 +86,10 @@ def deflect_pymunk(
         speed = np.hypot(velocity[stepped, 0], velocity[stepped, 1])
         dt = deflector_time_step(float(speed.max()), float(radius_m[stepped].min()), plates)
         n_spaces = math.ceil(stepped.size / GRANULES_PER_SPACE)
+        setup = _Zone(plates, contacts, zone, dt, rotation)
+        moving = _Moving(position, velocity, spin, elapsed)
         for k in range(n_spaces):
-            _run_group(stepped[k::n_spaces], plates, contacts, radius_m, mass_kg, rotation, zone, dt,
-                       position, velocity, spin, elapsed)
+            _run_group(stepped[k::n_spaces], setup, radius_m, mass_kg, moving)
 
     height = departure.height_m + departure.vertical_velocity_m_s * elapsed - 0.5 * GRAVITY_M_S2 * elapsed**2
     return Departure(
@@ -105,15 +114,9 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, a: np.ndarray, b: np.ndarra
     """Shortest distance (N,) between segments p0[i]-p1[i] and the fixed segment a-b."""
     d = p1 - p0
     e = b - a
-
-    def point_to_segment(q, start, direction):
-        length2 = np.sum(direction * direction, axis=-1)
-        t = np.clip(np.sum((q - start) * direction, axis=-1) / np.maximum(length2, 1e-300), 0.0, 1.0)
-        return np.hypot(*(q - start - t[..., None] * direction).T)
-
     ends = np.minimum(
-        np.minimum(point_to_segment(p0, a, e), point_to_segment(p1, a, e)),
-        np.minimum(point_to_segment(a, p0, d), point_to_segment(b, p0, d)),
+        np.minimum(point_segment_distance(p0, a, b), point_segment_distance(p1, a, b)),
+        np.minimum(point_segment_distance(a, p0, p1), point_segment_distance(b, p0, p1)),
     )
     cross = lambda u, v: u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]  # noqa: E731
     denom = cross(d, e)
@@ -124,11 +127,33 @@ def segment_distance(p0: np.ndarray, p1: np.ndarray, a: np.ndarray, b: np.ndarra
     return np.where(crossing, 0.0, ends)
 
 
-def _run_group(group, plates, contacts, radius_m, mass_kg, rotation, zone, dt,
-               position, velocity, spin, elapsed) -> None:
+@dataclass(frozen=True)
+class _Zone:
+    """The plate zone of one run: plates with their contacts, zone radius (m), step (s), rotation."""
+
+    plates: Sequence[Deflector]
+    contacts: Sequence[PlateContact]
+    radius_m: float
+    dt_s: float
+    rotation: str
+
+
+@dataclass(frozen=True)
+class _Moving:
+    """Plan-view states of all granules (N, 2), (N, 2), (N,) and time spent in the zone (N,), updated in place."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    spin: np.ndarray
+    elapsed: np.ndarray
+
+
+def _run_group(group, setup: _Zone, radius_m, mass_kg, moving: _Moving) -> None:
     """Step one space of granules until each crosses the zone circle (in place)."""
+    plates, contacts, zone, dt, rotation = setup.plates, setup.contacts, setup.radius_m, setup.dt_s, setup.rotation
+    position, velocity, spin, elapsed = moving.position, moving.velocity, moving.spin, moving.elapsed
     space = pymunk.Space()
-    space.collision_slop = 1e-5
+    space.collision_slop = COLLISION_SLOP_M
     for plate, contact in zip(plates, contacts):
         a, b = plate.endpoints()
         shape = pymunk.Segment(space.static_body, a, b, 0.5 * plate.thickness_m)
@@ -138,7 +163,7 @@ def _run_group(group, plates, contacts, radius_m, mass_kg, rotation, zone, dt,
     objects, ids = {}, []
     for i in group:
         m, r = float(mass_kg[i]), float(radius_m[i])
-        body = pymunk.Body(m, math.inf if rotation == "locked" else 0.4 * m * r * r)
+        body = pymunk.Body(m, math.inf if rotation == "locked" else SPHERE_INERTIA_FACTOR * m * r * r)
         body.position, body.velocity = tuple(position[i]), tuple(velocity[i])
         body.angular_velocity = float(spin[i])
         shape = pymunk.Circle(body, r)

@@ -25,19 +25,25 @@ import pymunk
 import pymunk.batch as batch
 
 from spreadgym.config.scene import Scene
+from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.contacts import Contacts
-from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT, Departure
-from spreadgym.physics.disc_friction import disc_surface_velocity, friction_velocity_change
-from spreadgym.physics.geometry import crossing_fraction, machine_frame_tracks, vane_segments
-from spreadgym.physics.granules import GranuleBatch, rotate
+from spreadgym.physics.departure import DEPARTED, Departure
+from spreadgym.physics.disc_friction import friction_velocity_change
+from spreadgym.physics.geometry import machine_frame_tracks, vane_segments
+from spreadgym.physics.granules import GranuleBatch
 from spreadgym.physics.numerics import choose_time_step, collision_bias_for
-from spreadgym.physics.vertical import GRAVITY_M_S2, VerticalState, free_fall_to
+from spreadgym.physics.stepped.finish import (
+    MAX_SPINNER_TIME_S,
+    DepartureRecord,
+    Kinematics,
+    held_by_disc,
+    start_at_vane_tops,
+)
+from spreadgym.physics.vertical import VerticalState
 
 GRANULES_PER_SPACE = 200
 SOLVER_ITERATIONS = 10
 COLLISION_SLOP_M = 1e-5
-MAX_SPINNER_TIME_S = 3.0
-STUCK_SPEED_M_S = 1e-4
 
 # Collision categories: a granule touches the vanes only while it is lower than they are.
 _GRANULE, _VANE = 0b01, 0b10
@@ -74,7 +80,7 @@ class _SpinnerSpace:
         self.shapes = {}
         for i in indices:
             mass, radius = float(granules.mass_kg[i]), float(granules.radius_m[i])
-            moment = math.inf if locked else 0.4 * mass * radius * radius
+            moment = math.inf if locked else SPHERE_INERTIA_FACTOR * mass * radius * radius
             body = pymunk.Body(mass, moment)
             body.position = tuple(start_xy[i])
             shape = pymunk.Circle(body, radius)
@@ -139,13 +145,11 @@ def simulate_pymunk(
     choice = choose_time_step(scene, float(granules.radius_m.min()))
     dt = choice.dt_s
     n = granules.count
-    # Above the vane tops a granule only falls: nothing touches it. The run starts when
-    # it reaches them, with the spinner turned on by omega * t_fall (see granules.py).
+    # The run starts at the vane tops (see finish.py).
     vane_top = scene.vanes.height_m
-    t_fall, vz_fall = free_fall_to(vane_top, scene.feed.drop_height_m)
-    spinner_angle = granules.phase_rad + omega * t_fall
-    start = rotate(granules.release_xy_m, -spinner_angle)
-    vertical = VerticalState(min(scene.feed.drop_height_m, vane_top), n, contacts.disc_restitution, dt, vz_fall)
+    first = start_at_vane_tops(scene, granules)
+    start = first.position_m
+    vertical = VerticalState(first.height_m, n, contacts.disc_restitution, dt, first.vz_m_s)
     below_vane_tops = vertical.z < vane_top
 
     n_spaces = max(1, math.ceil(n / GRANULES_PER_SPACE))
@@ -155,9 +159,7 @@ def simulate_pymunk(
     ]
 
     position, velocity, spin = start.copy(), np.zeros((n, 2)), np.zeros(n)
-    out_position, out_velocity = start.copy(), np.zeros((n, 2))
-    out_spin, out_height, out_vz, out_time = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
-    outcome = np.full(n, RETAINED_TIMEOUT, dtype=np.int8)
+    record = DepartureRecord(first)
     active = np.ones(n, dtype=bool)
     stuck_accel = contacts.disc_friction * GRAVITY_M_S2
 
@@ -179,27 +181,13 @@ def simulate_pymunk(
         leaving = r_new >= radius
         if leaving.any():
             li = idx[leaving]
-            frac = crossing_fraction(position[li], new_pos[leaving], radius)
-            out_position[li] = position[li] + frac[:, None] * (new_pos[leaving] - position[li])
-            out_velocity[li] = velocity[li] + frac[:, None] * (new_vel[leaving] - velocity[li])
-            out_spin[li] = spin[li] + frac * (new_spin[leaving] - spin[li])
-            out_height[li], out_vz[li] = vertical.at_fraction(li, frac)
-            out_time[li] = t - (1.0 - frac) * dt
-            outcome[li] = DEPARTED
+            frac = record.depart(li, Kinematics(position[li], velocity[li], spin[li]),
+                                 Kinematics(new_pos[leaving], new_vel[leaving], new_spin[leaving]), radius, t, dt)
+            record.height_m[li], record.vz_m_s[li] = vertical.at_fraction(li, frac)
 
-        # Stuck: resting, carried along with the disc (to within the drift one step of
-        # centripetal motion leaves), and the centrifugal pull below what static disc
-        # friction holds.
-        rel = new_vel - disc_surface_velocity(new_pos, omega)
-        pull = omega * omega * r_new
-        stuck = (
-            ~leaving
-            & vertical.resting[idx]
-            & (np.hypot(rel[:, 0], rel[:, 1]) < STUCK_SPEED_M_S + 2.0 * pull * dt)
-            & (pull < stuck_accel)
-        )
+        stuck = ~leaving & vertical.resting[idx] & held_by_disc(new_pos, new_vel, omega, stuck_accel, dt)
         if stuck.any():
-            outcome[idx[stuck]] = RETAINED_STUCK
+            record.stuck(idx[stuck])
         finished = idx[leaving | stuck]
         active[finished] = False
         position[idx], velocity[idx], spin[idx] = new_pos, new_vel, new_spin
@@ -237,23 +225,11 @@ def simulate_pymunk(
             progress(t)
 
     # Retained granules keep their last state.
-    tracks = machine_frame_tracks(track_points, out_position[tracked], spinner_angle[tracked])
-    kept = outcome != DEPARTED
-    out_position[kept], out_velocity[kept], out_spin[kept] = position[kept], velocity[kept], spin[kept]
-    out_height[kept], out_vz[kept], out_time[kept] = vertical.z[kept], vertical.vz[kept], t
-    return Departure(
-        position_m=rotate(out_position, spinner_angle),
-        velocity_m_s=rotate(out_velocity, spinner_angle),
-        spin_rad_s=out_spin,
-        height_m=out_height,
-        vertical_velocity_m_s=out_vz,
-        time_s=out_time + t_fall,
-        outcome=outcome,
-        model="pymunk",
-        dt_s=dt,
-        notes=[
-            f"time step {dt:.3g} s: {choice.reason}",
-            f"free fall above the vane tops solved exactly ({t_fall * 1e3:.1f} ms)",
-        ],
-        tracks=tracks,
-    )
+    tracks = machine_frame_tracks(track_points, record.position_m[tracked], first.spinner_angle_rad[tracked])
+    kept = np.flatnonzero(record.outcome != DEPARTED)
+    record.keep(kept, Kinematics(position[kept], velocity[kept], spin[kept]), vertical.z[kept], vertical.vz[kept])
+    notes = [
+        f"time step {dt:.3g} s: {choice.reason}",
+        f"free fall above the vane tops solved exactly ({first.fall_s * 1e3:.1f} ms)",
+    ]
+    return record.departure(t, "pymunk", dt, notes, tracks)
