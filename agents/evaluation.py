@@ -394,7 +394,7 @@ def simulate_row(env, row: Row):
     c, s = row.context, row.settings
     context = Context(c["fertilizer"], c["spinner_material"], float(c["target_swath_m"]),
                       float(c["forward_speed_m_s"]), tuple(c["wind_m_s"]))
-    settings = Settings(float(s["rpm"]), tuple(s["pitch_deg"]), tuple(s["deflector_angle_deg"]))
+    settings = Settings.from_dict(s)
     scene = task.settings_scene(task.context_scene(context), settings, int(row.sim_seed))
     return task.run(scene)
 

@@ -27,7 +27,8 @@ def _settings_map(env):
 
 
 def setting_ranges(env) -> dict[str, tuple[float, float]]:
-    """Each setting's name and range in action order: rpm, pitch_deg (or pitch_deg[k]), deflectors[i].angle_deg."""
+    """Each setting's name and range in action order: rpm, pitch_deg (or pitch_deg[k]),
+    deflectors[i].angle_deg, feed.radius_m, feed.angle_deg (the last three where adjustable)."""
     smap = _settings_map(env)
     return {name: (float(lo), float(hi)) for name, lo, hi in zip(smap.names, smap.low, smap.high)}
 
@@ -36,29 +37,32 @@ def settings_to_action(env, settings: Mapping[str, Any]) -> np.ndarray:
     """The unit vector (float32) of physical settings given as in `info["settings"]`.
 
     `settings` holds `rpm`, `pitch_deg` (a number, or one per vane when the env has
-    `pitch_per_vane`) and `deflector_angle_deg` (one per adjustable deflector; may be
-    left out when there is none). A value outside its range is a ConfigError naming it.
+    `pitch_per_vane`), `deflector_angle_deg` (one per adjustable deflector; may be
+    left out when there is none) and `feed_radius_m` / `feed_angle_deg` where the scene
+    makes the drop point adjustable. A value outside its range is a ConfigError naming it.
     """
     from spreadgym.envs.common.actions import Settings
 
     from spreadgym.errors import ConfigError
 
     smap = _settings_map(env)
-    unknown = set(settings) - {"rpm", "pitch_deg", "deflector_angle_deg"}
+    feed = [key.replace(".", "_") for key in smap.feed_keys]
+    known = ["rpm", "pitch_deg", "deflector_angle_deg", *feed]
+    unknown = set(settings) - set(known)
     if unknown:
-        raise ConfigError(f"settings.{sorted(unknown)[0]}", "unknown key; known: rpm, pitch_deg, deflector_angle_deg")
-    if "rpm" not in settings or "pitch_deg" not in settings:
-        raise ConfigError("settings", "rpm and pitch_deg are required")
+        raise ConfigError(f"settings.{sorted(unknown)[0]}", f"unknown key; known: {', '.join(known)}")
+    missing = [key for key in ("rpm", "pitch_deg", *feed) if key not in settings]
+    if missing:
+        raise ConfigError(f"settings.{missing[0]}", f"required; this env needs {', '.join(['rpm', 'pitch_deg', *feed])}")
     pitch = np.atleast_1d(np.asarray(settings["pitch_deg"], dtype=np.float64))
     angles = np.atleast_1d(np.asarray(settings.get("deflector_angle_deg", []), dtype=np.float64))
-    values = np.concatenate([[float(settings["rpm"])], pitch, angles])
+    values = np.concatenate([[float(settings["rpm"])], pitch, angles, [float(settings[key]) for key in feed]])
     if values.size != smap.size:
         raise ConfigError("settings", f"expected {smap.size} values ({', '.join(smap.names)}), got {values.size}")
     for name, value, lo, hi in zip(smap.names, values, smap.low, smap.high):
         if not lo <= value <= hi:
             raise ConfigError(f"settings.{name}", f"{value:g} is outside its range [{lo:g}, {hi:g}]")
-    unit = smap.to_unit(Settings(float(values[0]), tuple(pitch), tuple(angles)))
-    return unit.astype(np.float32)
+    return smap.to_unit(Settings.from_dict({**settings, "pitch_deg": pitch, "deflector_angle_deg": angles})).astype(np.float32)
 
 
 def action_to_settings(env, action) -> dict:

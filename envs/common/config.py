@@ -80,6 +80,8 @@ class SettingsConfig(StrictModel):
     pitch_deg: tuple[Real, Real] = (-30.0, 30.0)
     pitch_per_vane: bool = Field(default=False, description="one pitch per vane instead of a shared one")
     deflectors: bool = Field(default=True, description="adjustable deflectors (angle_range_deg) are actions")
+    feed: bool = Field(default=True, description="the drop point is an action where the scene gives it a range "
+                                                 "(feed.radius_range_m, feed.angle_range_deg)")
 
     @field_validator("rpm")
     @classmethod

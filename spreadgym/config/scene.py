@@ -79,6 +79,18 @@ class Feed(StrictModel):
     angle_deg: Real = Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG, description="release angle in the machine frame, from +x, ccw")
     spread_m: Real = Field(default=0.0, ge=0, le=2.0, description="s.d. of the release point, each axis; at most the disc radius")
     drop_height_m: Real = Field(ge=0, le=1.0, description="release height above the disc")
+    radius_range_m: Optional[tuple[Real, Real]] = Field(
+        default=None, description="if set, environments, searches and charts may move the release radius within it")
+    angle_range_deg: Optional[tuple[Angle, Angle]] = Field(
+        default=None, description="if set, environments, searches and charts may move the release angle within it")
+
+    @model_validator(mode="after")
+    def _ranges_ordered(self) -> "Feed":
+        for key in ("radius_range_m", "angle_range_deg"):
+            value = getattr(self, key)
+            if value is not None and value[0] > value[1]:
+                raise ValueError(f"{key}: [{value[0]:g}, {value[1]:g}] is reversed; give [low, high]")
+        return self
 
     @property
     def angle_rad(self) -> float:
@@ -197,6 +209,11 @@ class Scene(StrictModel):
             raise ValueError(f"feed.spread_m: {self.feed.spread_m:g} m is wider than the disc radius {radius:g} m")
         if self.feed.radius_m >= radius:
             raise ValueError(f"feed.radius_m: {self.feed.radius_m} m must be inside the disc radius {radius} m")
+        if self.feed.radius_range_m is not None and not (0.0 <= self.feed.radius_range_m[0]
+                                                         and self.feed.radius_range_m[1] < radius):
+            lo, hi = self.feed.radius_range_m
+            raise ValueError(f"feed.radius_range_m: [{lo:g}, {hi:g}] m must lie within [0, {radius:g}) m, "
+                             "inside the disc")
         for i, plate in enumerate(self.deflectors):
             if _segment_distance_to_origin(*plate.endpoints()) <= radius:
                 raise ValueError(f"deflectors[{i}]: the plate reaches inside the disc radius {radius} m")

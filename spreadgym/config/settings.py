@@ -46,10 +46,20 @@ class Axis:
 
     name: str  # e.g. "rpm", "pitch_deg", "vane_1_pitch_deg", "deflector_0_angle_deg", "feed_radius_m"
     key: str  # dotted scene key: "spinner.rpm", "vanes.pitch_deg", "deflectors.0.angle_deg", ...
-    low: float  # SI
-    high: float  # SI
+    named_low: float  # bounds in the unit of the name (rpm, deg, m), exactly as given
+    named_high: float
     per_unit: float  # SI value of one unit of the name and key (rpm: 2 pi / 60 rad/s, deg: pi / 180 rad)
     index: Optional[int] = None  # position in a list-valued key (one pitch per vane)
+
+    @property
+    def low(self) -> float:
+        """Lower bound, SI."""
+        return self.named_low * self.per_unit
+
+    @property
+    def high(self) -> float:
+        """Upper bound, SI."""
+        return self.named_high * self.per_unit
 
 
 def _range(key: str, value, low: float, high: float, unit: str) -> tuple[float, float]:
@@ -70,42 +80,51 @@ class SettingsSpace:
 
     `rpm` and `pitch_deg` are the disc-speed and pitch ranges (the scene has none of its
     own); `pitch_per_vane` defaults to what the scene gives (a list of pitches: one axis
-    per vane); `deflectors` makes every plate with `angle_range_deg` an axis;
-    `feed_radius_m` and `feed_angle_deg` make the drop point adjustable within the range.
+    per vane); `deflectors` makes every plate with `angle_range_deg` an axis; `feed`
+    makes the drop point adjustable where the scene gives `feed.radius_range_m` or
+    `feed.angle_range_deg`, and `feed_radius_m` / `feed_angle_deg` give (or replace)
+    those ranges.
     """
 
     def __init__(self, scene: Scene, rpm=DEFAULT_RPM, pitch_deg=DEFAULT_PITCH_DEG,
-                 pitch_per_vane: Optional[bool] = None, deflectors: bool = True,
+                 pitch_per_vane: Optional[bool] = None, deflectors: bool = True, feed: bool = True,
                  feed_radius_m=None, feed_angle_deg=None):
         radius = scene.spinner.radius_m
         top_rpm = min(MAX_RPM, MAX_TIP_SPEED_M_S / (radius * RPM_TO_RAD_S))
         lo, hi = _range("settings.rpm", rpm, 0.0, top_rpm, f"rpm (rim speed at most {MAX_TIP_SPEED_M_S:g} m/s)")
         if lo <= 0.0:
             raise ConfigError("settings.rpm", f"the lower end must be > 0 rpm, got {lo:g}")
-        axes = [Axis("rpm", "spinner.rpm", lo * RPM_TO_RAD_S, hi * RPM_TO_RAD_S, RPM_TO_RAD_S)]
+        axes = [Axis("rpm", "spinner.rpm", lo, hi, RPM_TO_RAD_S)]
         lo, hi = _range("settings.pitch_deg", pitch_deg, -MAX_PITCH_DEG, MAX_PITCH_DEG, "deg")
         per_vane = isinstance(scene.vanes.pitch_deg, list) if pitch_per_vane is None else bool(pitch_per_vane)
         if per_vane:
-            axes += [Axis(f"vane_{k}_pitch_deg", "vanes.pitch_deg", lo * DEG, hi * DEG, DEG, index=k)
+            axes += [Axis(f"vane_{k}_pitch_deg", "vanes.pitch_deg", lo, hi, DEG, index=k)
                      for k in range(scene.vanes.count)]
         else:
-            axes.append(Axis("pitch_deg", "vanes.pitch_deg", lo * DEG, hi * DEG, DEG))
+            axes.append(Axis("pitch_deg", "vanes.pitch_deg", lo, hi, DEG))
         if deflectors:
             for i, plate in enumerate(scene.deflectors):
                 if plate.angle_range_deg is not None:
                     lo, hi = (float(v) for v in plate.angle_range_deg)
                     _check_plate_clear(scene, i, lo, hi)
-                    axes.append(Axis(f"deflector_{i}_angle_deg", f"deflectors.{i}.angle_deg", lo * DEG, hi * DEG, DEG))
+                    axes.append(Axis(f"deflector_{i}_angle_deg", f"deflectors.{i}.angle_deg", lo, hi, DEG))
+        if not feed:
+            feed_radius_m = feed_angle_deg = None
+        else:
+            feed_radius_m = scene.feed.radius_range_m if feed_radius_m is None else feed_radius_m
+            feed_angle_deg = scene.feed.angle_range_deg if feed_angle_deg is None else feed_angle_deg
         if feed_radius_m is not None:
             lo, hi = _range("settings.feed_radius_m", feed_radius_m, 0.0, radius * (1.0 - 1e-9), "m (inside the disc)")
             axes.append(Axis("feed_radius_m", "feed.radius_m", lo, hi, 1.0))
         if feed_angle_deg is not None:
             lo, hi = _range("settings.feed_angle_deg", feed_angle_deg, -360.0, 360.0, "deg")
-            axes.append(Axis("feed_angle_deg", "feed.angle_deg", lo * DEG, hi * DEG, DEG))
+            axes.append(Axis("feed_angle_deg", "feed.angle_deg", lo, hi, DEG))
         self.axes: tuple[Axis, ...] = tuple(axes)
         self.vane_count = scene.vanes.count
         self.low = np.array([a.low for a in axes])
         self.high = np.array([a.high for a in axes])
+        self.named_low = np.array([a.named_low for a in axes])
+        self.named_high = np.array([a.named_high for a in axes])
 
     @property
     def names(self) -> list[str]:
@@ -122,20 +141,28 @@ class SettingsSpace:
 
     def unit(self, si) -> np.ndarray:
         """Unit vector of SI values (clipped to [-1, 1]; 0 on an axis of zero width)."""
-        v = np.asarray(si, dtype=np.float64).reshape(self.size)
-        span = self.high - self.low
-        u = np.where(span > 0, 2.0 * (v - self.low) / np.where(span > 0, span, 1.0) - 1.0, 0.0)
+        per_unit = np.array([a.per_unit for a in self.axes])
+        return self.named_unit(np.asarray(si, dtype=np.float64).reshape(self.size) / per_unit)
+
+    def named_unit(self, values) -> np.ndarray:
+        """Unit vector of values in the units of the names (rpm, deg, m); a value at a bound
+        gives exactly -1 or +1 (clipped to [-1, 1]; 0 on an axis of zero width)."""
+        v = np.asarray(values, dtype=np.float64).reshape(self.size)
+        span = self.named_high - self.named_low
+        u = np.where(span > 0, 2.0 * (v - self.named_low) / np.where(span > 0, span, 1.0) - 1.0, 0.0)
         return np.clip(u, -1.0, 1.0)
 
     def values(self, unit) -> dict[str, float]:
-        """name -> value in the unit of the name (rpm, deg, m)."""
-        return {a.name: float(v / a.per_unit) for a, v in zip(self.axes, self.si(unit))}
+        """name -> value in the unit of the name (rpm, deg, m); the ends of the box give the
+        bounds exactly as they were given."""
+        u = np.clip(np.asarray(unit, dtype=np.float64).reshape(self.size), -1.0, 1.0)
+        named = self.named_low + 0.5 * (u + 1.0) * (self.named_high - self.named_low)
+        return {a.name: float(v) for a, v in zip(self.axes, named)}
 
     def overrides(self, unit) -> dict[str, Any]:
         """Dotted scene keys that put the settings of `unit` into a scene."""
         out: dict[str, Any] = {}
-        for axis, value in zip(self.axes, self.si(unit)):
-            value = float(value / axis.per_unit)
+        for axis, value in zip(self.axes, self.values(unit).values()):
             if axis.index is None:
                 out[axis.key] = value
             else:
@@ -149,20 +176,21 @@ class SettingsSpace:
     def scene_unit(self, scene: Scene) -> np.ndarray:
         """The unit vector of the scene's own settings (clipped into the box; a shared
         pitch axis takes the vanes' mean pitch)."""
-        pitches = scene.vanes.pitches_rad()
+        pitches = scene.vanes.pitch_deg if isinstance(scene.vanes.pitch_deg, list) else [scene.vanes.pitch_deg]
+        pitches = [float(p) for p in pitches] * (scene.vanes.count if len(pitches) == 1 else 1)
         values = []
         for axis in self.axes:
             if axis.key == "spinner.rpm":
-                values.append(scene.spinner.rpm * RPM_TO_RAD_S)
+                values.append(scene.spinner.rpm)
             elif axis.key == "vanes.pitch_deg":
                 values.append(pitches[axis.index] if axis.index is not None else float(np.mean(pitches)))
             elif axis.key.startswith("deflectors."):
-                values.append(scene.deflectors[int(axis.key.split(".")[1])].angle_deg * DEG)
+                values.append(scene.deflectors[int(axis.key.split(".")[1])].angle_deg)
             elif axis.key == "feed.radius_m":
                 values.append(scene.feed.radius_m)
             else:
-                values.append(scene.feed.angle_deg * DEG)
-        return self.unit(values)
+                values.append(scene.feed.angle_deg)
+        return self.named_unit(values)
 
 
 def _check_plate_clear(scene: Scene, index: int, lo_deg: float, hi_deg: float) -> None:

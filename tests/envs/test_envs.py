@@ -174,7 +174,7 @@ def test_per_vane_pitch_and_adjustable_deflector_add_action_entries():
 
 
 def test_deflector_range_reaching_into_the_disc_is_refused():
-    plate = {"x_m": 0.0, "y_m": -0.2, "angle_deg": 0.0, "length_m": 0.1, "material": "steel",
+    plate = {"x_m": 0.0, "y_m": -0.19, "angle_deg": 0.0, "length_m": 0.1, "material": "steel",
              "angle_range_deg": [0.0, 90.0]}
     with pytest.raises(ConfigError, match="deflectors.0.angle_range_deg"):
         make(DESIGN_ID, scene_overrides={"deflectors": [plate]})
