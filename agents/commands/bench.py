@@ -14,7 +14,8 @@ from pathlib import Path
 from spreadgym.cli import arguments
 from spreadgym.report import format_table
 
-SECTIONS = ("spinner", "methods", "flight", "env", "references", "cv-noise", "targets", "speed-accuracy", "stability")
+SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
+            "stability")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,7 +34,7 @@ def write_csv(rows: list[dict], path: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from spreadgym.errors import SpreadgymError
-    from spreadgym.studies import benchmarks, estimate_bench, references, speed_accuracy, stability
+    from spreadgym.studies import benchmarks, estimate_bench, fidelity, references, speed_accuracy, stability
 
     if args.repeats < 1:
         raise SpreadgymError(f"--repeats: {args.repeats} must be at least 1")
@@ -49,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
         "flight": lambda: benchmarks.flight_benchmark(repeats=max(args.repeats, 5)),
         "env": lambda: env_steps_per_second(),
         "references": lambda: reference_rows(references, args.out / "references", say),
+        "fidelity": lambda: fidelity_rows(fidelity, args.out, say),
         "cv-noise": lambda: estimate_bench.cv_noise_rows(),
         "targets": lambda: target_rows(estimate_bench, args.out, say),
         "speed-accuracy": lambda: speed_accuracy.speed_accuracy_rows(args.out / "references", progress=say),
@@ -79,6 +81,14 @@ def reference_rows(references, out: Path, say) -> list[dict]:
     return rows
 
 
+def fidelity_rows(fidelity, out: Path, say) -> list[dict]:
+    """The compiled model against the converged full model on every reference scene: a
+    table (fidelity.md) and six-panel figures (fidelity/<scene>.png)."""
+    rows = fidelity.fidelity_rows(out / "references", figures=out / "fidelity", progress=say)
+    (out / "fidelity.md").write_text(fidelity.fidelity_markdown(rows), encoding="utf-8")
+    return rows
+
+
 def target_rows(estimate_bench, out: Path, say) -> list[dict]:
     """The estimate's targets on every reference scene, full and fast model; also as markdown."""
     rows = []
@@ -88,25 +98,33 @@ def target_rows(estimate_bench, out: Path, say) -> list[dict]:
     return rows
 
 
-def env_steps_per_second(steps: int = 40) -> list[dict]:
-    """Env steps per second at the default config of each environment (one process)."""
+def env_steps_per_second(steps: int = 20, repeats: int = 5) -> list[dict]:
+    """Env steps per second at the default config of each environment (one process), on
+    the paper and the field scene: the median of `repeats` blocks of `steps` random
+    steps after one warm-up step (which compiles the fast model), with the blocks' range."""
+    import statistics
     import time
 
     import gymnasium as gym
 
     rows = []
     for env_id in ("spreadgym:SpinnerDesign-v0", "spreadgym:SpreaderTuning-v0"):
-        env = gym.make(env_id)
-        env.reset(seed=0)
-        env.action_space.seed(0)
-        start = time.perf_counter()
-        for _ in range(steps):
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            if terminated or truncated:
-                env.reset()
-        wall = time.perf_counter() - start
-        config = env.unwrapped.config
-        rows.append({"env": env_id, "model": config.model, "granules": config.granules, "steps": steps,
-                     "steps_per_s": steps / wall, "ms_per_step": 1e3 * wall / steps})
-        env.close()
+        for scene in ("paper", "field"):
+            env = gym.make(env_id, scene=scene)
+            env.reset(seed=0)
+            env.action_space.seed(0)
+            env.step(env.action_space.sample())
+            rates = []
+            for _ in range(repeats):
+                start = time.perf_counter()
+                for _ in range(steps):
+                    _, _, terminated, truncated, info = env.step(env.action_space.sample())
+                    if terminated or truncated:
+                        env.reset()
+                rates.append(steps / (time.perf_counter() - start))
+            config = env.unwrapped.config
+            rows.append({"env": env_id, "scene": scene, "model": info["metrics"]["model"], "granules": config.granules,
+                         "steps_per_s": statistics.median(rates), "steps_per_s_low": min(rates),
+                         "steps_per_s_high": max(rates), "ms_per_step": 1e3 / statistics.median(rates)})
+            env.close()
     return rows

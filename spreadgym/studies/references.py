@@ -35,10 +35,14 @@ def reference_path(out_dir: Path, model: str, name: str) -> Path:
     return Path(out_dir) / model / f"{name}.json"
 
 
-def compute_references(out_dir: Path, model: str = "pymunk", runs: int = DEFAULT_RUNS,
+def compute_references(out_dir: Path, model: str = "pymunk", runs: Optional[int] = None,
                        names: Optional[list[str]] = None, overrides: Optional[dict] = None,
                        progress: Callable[[str], None] = lambda _: None) -> list[dict]:
-    """Compute (or reuse) the reference of every family scene; returns their JSON dicts."""
+    """Compute (or reuse) the reference of every family scene; returns their JSON dicts.
+
+    A stored reference is reused when its model and overrides match and, if `runs` is
+    given, its run count too; a missing one is computed with `runs` (default
+    DEFAULT_RUNS). Each stored file records how many runs it pooled."""
     family = reference_family(overrides)
     unknown = sorted(set(names or []) - set(family))
     if unknown:
@@ -47,14 +51,15 @@ def compute_references(out_dir: Path, model: str = "pymunk", runs: int = DEFAULT
     results = []
     for name in names or list(family):
         path = reference_path(out_dir, model, name)
-        settings = {"model": model, "runs": runs, "overrides": overrides or {}}
+        settings = {"model": model, "runs": runs or DEFAULT_RUNS, "overrides": overrides or {}}
         if path.is_file():
             stored = json.loads(path.read_text(encoding="utf-8"))
-            if stored.get("settings") == settings:
+            kept = stored.get("settings", {})
+            if (kept.get("model"), kept.get("overrides")) == (model, overrides or {}) and runs in (None, kept.get("runs")):
                 results.append(stored)
                 continue
-        progress(f"{name}: {runs} runs, {model}")
-        payload = reference_from(family[name], pool_runs(family[name], runs, model=model)).to_json()
+        progress(f"{name}: {settings['runs']} runs, {model}")
+        payload = reference_from(family[name], pool_runs(family[name], settings["runs"], model=model)).to_json()
         payload.update(name=name, settings=settings)
         path.parent.mkdir(parents=True, exist_ok=True)
         partial = path.with_suffix(".json.partial")
