@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 import numpy as np
-from spreadgym.agents.evaluation import SEARCH_SEED, WORST_CV_PERCENT, EvalContext, Row, score_action
 
+from spreadgym.agents.evaluation import SEARCH_SEED, WORST_CV_PERCENT, EvalContext, Row, score_action
 from spreadgym.errors import SpreadgymError
 
 DEFAULT_BUDGET = 200

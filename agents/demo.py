@@ -25,11 +25,11 @@ from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
+from tqdm import tqdm
+
 from spreadgym.agents.baselines import cmaes_search
 from spreadgym.agents.evaluation import DESIGN_ENV, EvalContext, make_env, published_action, write_csv
 from spreadgym.agents.training import load_policy
-from tqdm import tqdm
-
 from spreadgym.config.scene import load_scene, scene_with
 from spreadgym.errors import SpreadgymError
 from spreadgym.report import format_table, print_json

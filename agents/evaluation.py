@@ -29,9 +29,9 @@ from typing import Any, Callable, Iterable, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
+
 from spreadgym.envs.common.actions import Settings
 from spreadgym.envs.common.task import Context
-
 from spreadgym.errors import SpreadgymError
 from spreadgym.report import format_table
 

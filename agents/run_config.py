@@ -33,8 +33,8 @@ from pathlib import Path
 from typing import Any, Literal, Optional
 
 from pydantic import Field, create_model, field_validator, model_validator
-from spreadgym.agents.evaluation import canonical_env_id
 
+from spreadgym.agents.evaluation import canonical_env_id
 from spreadgym.config.base import Integer, Real, StrictModel, validate
 from spreadgym.config.resources import config_dir, read_yaml
 from spreadgym.errors import ConfigError, SpreadgymError

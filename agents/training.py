@@ -34,6 +34,8 @@ from typing import Any, Optional
 import gymnasium as gym
 import numpy as np
 import yaml
+from tqdm import tqdm
+
 from spreadgym.agents.run_config import (
     ALGOS,
     RunConfig,
@@ -44,8 +46,6 @@ from spreadgym.agents.run_config import (
     run_config_schema,
     validate_config,
 )
-from tqdm import tqdm
-
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.errors import ConfigError, SpreadgymError
 

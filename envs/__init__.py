@@ -42,7 +42,6 @@ def settings_to_action(env, settings: Mapping[str, Any]) -> np.ndarray:
     makes the drop point adjustable. A value outside its range is a ConfigError naming it.
     """
     from spreadgym.envs.common.actions import Settings
-
     from spreadgym.errors import ConfigError
 
     smap = _settings_map(env)
@@ -53,7 +52,8 @@ def settings_to_action(env, settings: Mapping[str, Any]) -> np.ndarray:
         raise ConfigError(f"settings.{sorted(unknown)[0]}", f"unknown key; known: {', '.join(known)}")
     missing = [key for key in ("rpm", "pitch_deg", *feed) if key not in settings]
     if missing:
-        raise ConfigError(f"settings.{missing[0]}", f"required; this env needs {', '.join(['rpm', 'pitch_deg', *feed])}")
+        needed = ", ".join(["rpm", "pitch_deg", *feed])
+        raise ConfigError(f"settings.{missing[0]}", f"required; this env needs {needed}")
     pitch = np.atleast_1d(np.asarray(settings["pitch_deg"], dtype=np.float64))
     angles = np.atleast_1d(np.asarray(settings.get("deflector_angle_deg", []), dtype=np.float64))
     values = np.concatenate([[float(settings["rpm"])], pitch, angles, [float(settings[key]) for key in feed]])
@@ -62,7 +62,8 @@ def settings_to_action(env, settings: Mapping[str, Any]) -> np.ndarray:
     for name, value, lo, hi in zip(smap.names, values, smap.low, smap.high):
         if not lo <= value <= hi:
             raise ConfigError(f"settings.{name}", f"{value:g} is outside its range [{lo:g}, {hi:g}]")
-    return smap.to_unit(Settings.from_dict({**settings, "pitch_deg": pitch, "deflector_angle_deg": angles})).astype(np.float32)
+    given = Settings.from_dict({**settings, "pitch_deg": pitch, "deflector_angle_deg": angles})
+    return smap.to_unit(given).astype(np.float32)
 
 
 def action_to_settings(env, action) -> dict:
@@ -78,6 +79,7 @@ def register_rllib() -> None:
     Needs `ray[rllib]` (the `rllib` extra).
     """
     from ray.tune.registry import register_env
+
     from spreadgym.envs.registration import ENVS
 
     for name in ENVS:

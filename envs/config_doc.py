@@ -1,10 +1,9 @@
 """Print docs/config-keys.md: every key of scenes and of both environments' configs,
 with its type, default and accepted range, generated from the schemas."""
 
-from spreadgym.envs.common.config import DesignConfig, TuningConfig
-
 from spreadgym.config.scene import Scene
 from spreadgym.config.schema_doc import schema_markdown
+from spreadgym.envs.common.config import DesignConfig, TuningConfig
 
 SECTIONS = {"Scenes (configs/scenes/*.yaml, `--set`)": Scene,
             "SpinnerDesign-v0 (configs/envs/spinner_design.yaml, gym.make kwargs)": DesignConfig,

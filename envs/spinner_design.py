@@ -22,14 +22,14 @@ from typing import Optional
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+
+from spreadgym.config.scene import Scene
 from spreadgym.envs.common import reward as rewards
 from spreadgym.envs.common.actions import check_action
 from spreadgym.envs.common.base_env import SpreadgymEnv
 from spreadgym.envs.common.config import DESIGN
 from spreadgym.envs.common.render import draw_frame, frame_lines
 from spreadgym.envs.common.task import SEED_BOUND, check_reset_options, info_metrics
-
-from spreadgym.config.scene import Scene
 
 
 class SpinnerDesignEnv(SpreadgymEnv):

@@ -2,9 +2,9 @@
 
 import pytest
 
+from spreadgym.config.materials import load_library
 from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.granules import sample_granules
-from spreadgym.config.materials import load_library
 
 
 @pytest.fixture(scope="session")

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 from typing import Optional
 
 import numpy as np
+
 from spreadgym.agents.chart.spec import Cell, ChartSpec
 from spreadgym.agents.chart.store import ChartStore, json_text, write_atomic
 

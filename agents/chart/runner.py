@@ -22,7 +22,6 @@ from spreadgym.agents.chart import outputs
 from spreadgym.agents.chart.search import run_cell
 from spreadgym.agents.chart.spec import Cell, ChartSpec, make_spec
 from spreadgym.agents.chart.store import ChartStore
-
 from spreadgym.errors import SpreadgymError
 
 ENGINES = ("ray", "local")

@@ -25,10 +25,10 @@ import time
 from typing import Optional
 
 import numpy as np
+
 from spreadgym.agents.baselines import LEADERS, Leader, cmaes_search, leaders, split_budget
 from spreadgym.agents.chart.spec import Cell, ChartSpec, cell_seed
 from spreadgym.agents.evaluation import WORST_CV_PERCENT
-
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import scene_with
 from spreadgym.spread.metrics import RunMetrics

@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Optional
 
 from spreadgym.agents.chart.spec import Cell, ChartSpec
-
 from spreadgym.errors import SpreadgymError
 from spreadgym.report import print_json
 

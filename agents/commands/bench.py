@@ -20,7 +20,8 @@ SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only", choices=SECTIONS, action="append", help="run only these sections")
-    parser.add_argument("--out", type=arguments.output_folder, default=Path("docs/bench"), help="output folder (default docs/bench)")
+    parser.add_argument("--out", type=arguments.output_folder, default=Path("docs/bench"),
+                        help="output folder (default docs/bench)")
     parser.add_argument("--repeats", type=arguments.COUNT, default=3, help="repeats per timing (median is reported)")
 
 

@@ -39,7 +39,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from spreadgym.agents.chart import chart
     from spreadgym.agents.chart.outputs import markdown
-
     from spreadgym.report import print_json
 
     result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving, budget=args.budget,

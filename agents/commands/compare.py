@@ -58,11 +58,11 @@ def baseline_job(env_id: str, env_kwargs: dict, ctx, method: str, budget: int, s
 
 
 def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
     from spreadgym.agents import evaluation as ev
     from spreadgym.agents.baselines import METHOD_TITLES
     from spreadgym.agents.commands.evaluate import evaluation_env_kwargs
-    from tqdm import tqdm
-
     from spreadgym.errors import SpreadgymError
     from spreadgym.report import print_json
 
@@ -143,7 +143,6 @@ def _load_policies(paths) -> list:
     """(key, SavedPolicy, title) per --model; all SpinnerDesign, all on the same env kwargs."""
     from spreadgym.agents import evaluation as ev
     from spreadgym.agents.training import load_policy
-
     from spreadgym.errors import SpreadgymError
 
     out = []
@@ -174,7 +173,6 @@ def _load_policies(paths) -> list:
 
 def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, elapsed) -> list:
     from spreadgym.agents import evaluation as ev
-
     from spreadgym.report import print_json
 
     out.mkdir(parents=True, exist_ok=True)

@@ -13,9 +13,10 @@ from spreadgym.cli import arguments
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents import demo
 
-    parser.add_argument("--out", type=arguments.output_folder, default=Path("out/demo"), help="folder for tables and pictures "
-                        "(default out/demo)")
-    parser.add_argument("--target-swath", type=arguments.real(0.0, 100.0, low_open=True), default=demo.DEFAULT_TARGET_M, metavar="M",
+    parser.add_argument("--out", type=arguments.output_folder, default=Path("out/demo"),
+                        help="folder for tables and pictures (default out/demo)")
+    parser.add_argument("--target-swath", type=arguments.real(0.0, 100.0, low_open=True),
+                        default=demo.DEFAULT_TARGET_M, metavar="M",
                         help=f"target swath in m, on the 0.5 m tray grid (default {demo.DEFAULT_TARGET_M:g})")
     parser.add_argument("--budget", type=arguments.COUNT, default=demo.DEFAULT_BUDGET, metavar="N",
                         help=f"CMA-ES simulations on the analytic model (default {demo.DEFAULT_BUDGET})")
@@ -35,7 +36,6 @@ def run(args: argparse.Namespace) -> int:
     from contextlib import redirect_stdout
 
     from spreadgym.agents import demo
-
     from spreadgym.report import print_json
 
     started = time.perf_counter()

@@ -17,17 +17,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
                         help="granules per simulation (default: the env's default, 2000, whatever training used)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
-    parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M", help="target swaths (default 2 3 4 5)")
+    parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
+                        help="target swaths (default 2 3 4 5)")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON")
-    parser.add_argument("--out", type=arguments.output_folder, metavar="DIR2", help="folder for the table and plots (default: DIR/eval)")
+    parser.add_argument("--out", type=arguments.output_folder, metavar="DIR2",
+                        help="folder for the table and plots (default: DIR/eval)")
     parser.add_argument("--no-plots", action="store_true", help="skip the pattern plots")
 
 
 def run(args: argparse.Namespace) -> int:
-    from spreadgym.agents import evaluation as ev
-    from spreadgym.agents.training import load_policy
     from tqdm import tqdm
 
+    from spreadgym.agents import evaluation as ev
+    from spreadgym.agents.training import load_policy
     from spreadgym.errors import SpreadgymError
     from spreadgym.report import print_json
 
@@ -97,7 +99,6 @@ def _json_row(row) -> dict:
 
 def write_outputs(out: Path, rows, summary, env, plot_method) -> list:
     from spreadgym.agents import evaluation as ev
-
     from spreadgym.report import print_json
 
     out.mkdir(parents=True, exist_ok=True)

@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 from spreadgym.agents.training import train
-
 from spreadgym.cli import arguments
 from spreadgym.config.overrides import parse_assignments
 

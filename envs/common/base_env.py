@@ -7,10 +7,10 @@ from typing import Any, Optional
 
 import gymnasium as gym
 import numpy as np
+
 from spreadgym.envs.common.config import load_env_config
 from spreadgym.envs.common.render import HumanViewer
 from spreadgym.envs.common.task import Context, Task
-
 from spreadgym.errors import ConfigError
 
 

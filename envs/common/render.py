@@ -24,10 +24,10 @@ from __future__ import annotations
 from typing import Optional
 
 import numpy as np
-from spreadgym.envs.common.actions import Settings
-from spreadgym.envs.common.task import Context
 
 from spreadgym.config.scene import Scene
+from spreadgym.envs.common.actions import Settings
+from spreadgym.envs.common.task import Context
 from spreadgym.physics.geometry import vane_segments
 
 

@@ -23,7 +23,6 @@ import math
 from dataclasses import asdict, dataclass
 
 from spreadgym.envs.common.config import RewardConfig, TuningRewardConfig
-
 from spreadgym.spread.metrics import RunMetrics
 
 

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from spreadgym.envs.common.actions import Settings, SettingsMap
-from spreadgym.envs.common.config import DesignConfig
 
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import Scene, load_scene, scene_with
+from spreadgym.envs.common.actions import Settings, SettingsMap
+from spreadgym.envs.common.config import DesignConfig
 from spreadgym.errors import ConfigError, MaterialError
 from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.selection import choose_model

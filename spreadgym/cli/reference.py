@@ -23,7 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key, VALUE parsed as YAML (e.g. spinner.rpm=800)")
     parser.add_argument("--model", default="auto", choices=MODELS, help="spinner model (default: auto)")
-    parser.add_argument("--granules", type=arguments.GRANULES, metavar="N", help="granules per run (default: the scene's)")
+    parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
+                        help="granules per run (default: the scene's)")
     parser.add_argument("--replicates", type=arguments.integer(2, 65536), default=DEFAULT_RUNS, metavar="K",
                         help=f"independent runs pooled (default {DEFAULT_RUNS}, at least {MIN_RUNS})")
     parser.add_argument("--json", action="store_true", help="print the reference as JSON")

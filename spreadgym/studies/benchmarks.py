@@ -127,7 +127,9 @@ def flight_benchmark(counts=(2000, 20000), repeats: int = 5) -> list[dict]:
                                     speed * np.sin(lift)])
         position = 0.15 * np.column_stack([np.cos(angle), np.sin(angle)])
         diameter = rng.uniform(0.002, 0.004, n)
-        wall, _ = median_time(lambda: flight_model.fly(position, np.full(n, 0.8), velocity, diameter, 1734.0,
-                                                       scene.flight), repeats)
+        def fly(position=position, velocity=velocity, diameter=diameter, n=n):
+            return flight_model.fly(position, np.full(n, 0.8), velocity, diameter, 1734.0, scene.flight)
+
+        wall, _ = median_time(fly, repeats)
         rows.append({"granules": n, "wall_s": wall, "granules_per_s": n / wall})
     return rows

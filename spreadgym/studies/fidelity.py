@@ -81,7 +81,8 @@ def fidelity_rows(references_dir: Path, model: str = "compiled", full: str = "py
         tv = total_variation(azimuth_histogram(fast), azimuth_histogram(slow))
         time_ratio = float(np.median(tf) / np.median(tp))
         rows.append({
-            "scene": name, "cv_fast_percent": f_ref["cv_percent_at_target"], "cv_full_percent": p_ref["cv_percent_at_target"],
+            "scene": name,
+            "cv_fast_percent": f_ref["cv_percent_at_target"], "cv_full_percent": p_ref["cv_percent_at_target"],
             "cv_diff_pp": cv_diff, "cv_diff_se_pp": se,
             "swath_fast_m": f_ref["effective_swath_m"], "swath_full_m": p_ref["effective_swath_m"],
             "azimuth_tv": tv, "median_time_ratio": time_ratio,
@@ -89,7 +90,8 @@ def fidelity_rows(references_dir: Path, model: str = "compiled", full: str = "py
                                  / np.mean(np.hypot(*slow.velocity_m_s[slow.departed].T))),
             "exit_angle_diff_deg": float(np.degrees(np.mean(exit_angle_rad(fast)) - np.mean(exit_angle_rad(slow)))),
             "departed_fast": float(fast.departed.mean()), "departed_full": float(slow.departed.mean()),
-            "meets_cv": abs(cv_diff) <= TARGET_CV_PP, "meets_swath": f_ref["effective_swath_m"] == p_ref["effective_swath_m"],
+            "meets_cv": abs(cv_diff) <= TARGET_CV_PP,
+            "meets_swath": f_ref["effective_swath_m"] == p_ref["effective_swath_m"],
             "meets_azimuth": tv <= TARGET_AZIMUTH_TV, "meets_time": abs(time_ratio - 1.0) <= TARGET_TIME_RATIO,
         })
         if figures is not None:

@@ -55,7 +55,8 @@ def compute_references(out_dir: Path, model: str = "pymunk", runs: Optional[int]
         if path.is_file():
             stored = json.loads(path.read_text(encoding="utf-8"))
             kept = stored.get("settings", {})
-            if (kept.get("model"), kept.get("overrides")) == (model, overrides or {}) and runs in (None, kept.get("runs")):
+            same_run = (kept.get("model"), kept.get("overrides")) == (model, overrides or {})
+            if same_run and runs in (None, kept.get("runs")):
                 results.append(stored)
                 continue
         progress(f"{name}: {settings['runs']} runs, {model}")

@@ -5,9 +5,9 @@ import csv
 import json
 
 import pytest
+
 from spreadgym.agents.chart import make_spec, run_chart
 from spreadgym.agents.chart.spec import cell_seed
-
 from spreadgym.cli.main import main
 from spreadgym.config.resources import resolve_named
 from spreadgym.config.scene import scene_with

@@ -7,6 +7,7 @@ import sys
 
 import pytest
 import ray
+
 from spreadgym.agents.chart import make_spec, run_chart
 from spreadgym.agents.chart.search import run_cell
 

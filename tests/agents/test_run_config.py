@@ -1,8 +1,8 @@
 """The training run config: a pydantic model per algorithm, changed by the one dotted-override function."""
 
 import pytest
-from spreadgym.agents.run_config import default_config_path, read_config, run_config_schema, validate_config
 
+from spreadgym.agents.run_config import default_config_path, read_config, run_config_schema, validate_config
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.errors import ConfigError
 

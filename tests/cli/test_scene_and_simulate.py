@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from spreadgym.cli.main import main
-from spreadgym.physics.contacts import resolve_contacts
-from spreadgym.errors import ConfigError, MaterialError
 from spreadgym.config.overrides import parse_assignments
-from spreadgym.physics.numerics import choose_time_step
 from spreadgym.config.scene import load_scene
+from spreadgym.errors import ConfigError, MaterialError
+from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.physics.numerics import choose_time_step
 
 
 @pytest.mark.parametrize(

@@ -4,8 +4,8 @@ through the same checks as scenes, and the gymnasium contracts hold."""
 import gymnasium as gym
 import numpy as np
 import pytest
-import spreadgym.envs  # noqa: F401  (registers the ids)
 
+import spreadgym.envs  # noqa: F401  (registers the ids)
 from spreadgym.errors import ConfigError
 
 IDS = ("spreadgym/SpinnerDesign-v0", "spreadgym/SpreaderTuning-v0")

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from gymnasium.utils.env_checker import data_equivalence
-from spreadgym.envs.common import reward as rewards
-from spreadgym.envs.common.config import DESIGN, TUNING, load_env_config
-from spreadgym.envs.spreader_tuning import bout_features, rebin, single_pass_features
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import spreadgym  # noqa: F401  (registers the envs)
-from spreadgym.errors import ConfigError
 from spreadgym.config.scene import load_scene
+from spreadgym.envs.common import reward as rewards
+from spreadgym.envs.common.config import DESIGN, TUNING, load_env_config
+from spreadgym.envs.spreader_tuning import bout_features, rebin, single_pass_features
+from spreadgym.errors import ConfigError
 from spreadgym.physics.selection import choose_model
 from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.pattern import Trays

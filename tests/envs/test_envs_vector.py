@@ -5,10 +5,10 @@ import functools
 import gymnasium as gym
 import numpy as np
 import pytest
-from spreadgym.envs.common.config import DESIGN, load_env_config
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
 import spreadgym  # noqa: F401  (registers the envs)
+from spreadgym.envs.common.config import DESIGN, load_env_config
 from spreadgym.physics.selection import MODELS
 
 IDS = ["spreadgym/SpinnerDesign-v0", "spreadgym/SpreaderTuning-v0"]

@@ -10,12 +10,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import yaml
+
+import spreadgym  # noqa: F401  (registers the envs)
 from spreadgym.envs import action_to_settings, setting_ranges, settings_to_action
 from spreadgym.envs.common.config import DESIGN, TUNING, load_env_config
 from spreadgym.envs.vector import SpinnerDesignVectorEnv
 from spreadgym.envs.zoo import hyperparams_path
-
-import spreadgym  # noqa: F401  (registers the envs)
 from spreadgym.errors import ConfigError
 
 SMALL = {"granules": 32}

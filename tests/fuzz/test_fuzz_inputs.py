@@ -10,11 +10,11 @@ from contextlib import redirect_stderr, redirect_stdout
 import gymnasium as gym
 import numpy as np
 import pytest
-import spreadgym.envs  # noqa: F401  (registers the ids)
 from conftest import time_limit
 from hypothesis import given
 from hypothesis import strategies as st
 
+import spreadgym.envs  # noqa: F401  (registers the ids)
 from spreadgym.cli.main import main
 from spreadgym.config.scene import load_scene
 from spreadgym.errors import SpreadgymError

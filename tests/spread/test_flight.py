@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
+from spreadgym.config.scene import Flight
 from spreadgym.errors import ConfigError
 from spreadgym.spread.flight import Landing, drag_constant, fly, reference_landing, terminal_speed_m_s
-from spreadgym.config.scene import Flight
 
 G = 9.81
 

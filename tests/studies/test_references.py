@@ -15,7 +15,8 @@ def test_the_family_holds_the_documented_scenes():
 
 def test_a_stored_reference_is_reused_when_it_matches_and_recomputed_when_it_does_not(tmp_path):
     said = []
-    first = compute_references(tmp_path, model="analytic", runs=2, names=["paper"], overrides=TINY, progress=said.append)
+    first = compute_references(tmp_path, model="analytic", runs=2, names=["paper"], overrides=TINY,
+                               progress=said.append)
     assert said == ["paper: 2 runs, analytic"] and first[0]["granules"] == 128
     again = compute_references(tmp_path, model="analytic", names=["paper"], overrides=TINY, progress=said.append)
     assert len(said) == 1 and again == first  # runs not given: whatever was stored serves

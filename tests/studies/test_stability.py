@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from spreadgym.studies import stability as st
+from spreadgym.config.scene import load_scene
 from spreadgym.errors import ConfigError
 from spreadgym.physics.numerics import choose_time_step, tunnelling_limit_s
-from spreadgym.config.scene import load_scene
+from spreadgym.studies import stability as st
 
 # --- a. pymunk tunnelling ------------------------------------------------------------------
 

@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from spreadgym.studies import paper as study
 from spreadgym.cli.main import main
 from spreadgym.errors import SpreadgymError
+from spreadgym.studies import paper as study
 
 ROW_KEYS = {
     "sweep", "material", "rpm", "diameter_m", "rotation", "speed_mean_m_s", "speed_std_m_s", "spin_mean_rad_s",

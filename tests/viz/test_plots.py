@@ -11,11 +11,11 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from spreadgym.spread import pattern
-from spreadgym.viz import plots
-from spreadgym.physics.departure import RETAINED_TIMEOUT
-from spreadgym.spread.pipeline import run_scene
 from spreadgym.config.scene import load_scene, scene_with
+from spreadgym.physics.departure import RETAINED_TIMEOUT
+from spreadgym.spread import pattern
+from spreadgym.spread.pipeline import run_scene
+from spreadgym.viz import plots
 
 PLATE = {"x_m": 0.0, "y_m": -0.3, "angle_deg": 0.0, "length_m": 0.2, "material": "steel"}
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
