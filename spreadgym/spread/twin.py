@@ -129,9 +129,12 @@ def choose_for_discs(parts: list[Disc], requested: str) -> tuple[str, str]:
 
 
 def mirrored(throw: Throw) -> Throw:
-    """A throw mirrored about its disc's axis (x -> -x): positions, velocities, spins, phases."""
+    """A throw mirrored about its disc's axis (x -> -x): positions, velocities, spins, phases.
+
+    The mirror scene's vane k is the image of vane N - k when its spinner stands at
+    pi - phase, so that is a mirrored granule's phase."""
     g = throw.granules
-    granules = dataclasses.replace(g, release_xy_m=g.release_xy_m * [-1.0, 1.0], phase_rad=-g.phase_rad)
+    granules = dataclasses.replace(g, release_xy_m=g.release_xy_m * [-1.0, 1.0], phase_rad=np.pi - g.phase_rad)
     return Throw(granules, _mirror_states(throw.departure), _mirror_states(throw.launch))
 
 
