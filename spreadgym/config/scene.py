@@ -8,11 +8,11 @@ Validation errors name the dotted key, the bad value and the allowed range.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Mapping, Optional, Union
+from typing import Annotated, Any, Literal, Mapping, Optional, TypeVar, Union
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationError, model_validator
 
-from spreadgym.config.base import Integer, Real, StrictModel, validate
+from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error, validate
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.config.resources import read_yaml, resolve_named
 from spreadgym.errors import ConfigError
@@ -25,7 +25,9 @@ MAX_TIP_SPEED_M_S = 100.0  # disc rim speed; spreaders run 15-45 m/s, beyond 100
 MAX_WIND_M_S = 20.0  # each component; nobody spreads in a gale, and the flight stays bounded
 MAX_ANGLE_DEG = 360.0
 MAX_PLANE_M = 5.0  # plates and feed points lie within this distance of the disc axis
+MAX_SPACING_M = 3.0  # between the axes of twin discs; machines carry them 0.6-1.2 m apart
 MIN_DT_S = 1e-6  # far below every model's automatic step (5e-5 to 2e-4 s): smaller only costs time
+ModelT = TypeVar("ModelT", bound=StrictModel)
 WindComponent = Annotated[Real, Field(ge=-MAX_WIND_M_S, le=MAX_WIND_M_S)]
 Angle = Annotated[Real, Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG)]
 
@@ -177,6 +179,49 @@ class Sim(StrictModel):
                                         "standard error rest on them); the most that divide sim.granules")
 
 
+class TwinSpinner(StrictModel):
+    """`spinner` keys of the second disc that differ from the first's mirror image (null: mirrored)."""
+
+    radius_m: Optional[Real] = Field(default=None, gt=0, le=2.0)
+    rpm: Optional[Real] = Field(default=None, ge=MIN_RPM, le=MAX_RPM)
+    height_m: Optional[Real] = Field(default=None, ge=0, le=5.0)
+    direction: Optional[Literal["ccw", "cw"]] = Field(default=None, description="null: opposite to the first disc")
+    material: Optional[str] = None
+
+
+class TwinVanes(StrictModel):
+    """`vanes` keys of the second disc (null: the first disc's, pitches in mirrored order)."""
+
+    count: Optional[Integer] = Field(default=None, ge=1, le=16)
+    inner_radius_m: Optional[Real] = Field(default=None, ge=0, le=2.0)
+    outer_radius_m: Optional[Real] = Field(default=None, gt=0)
+    thickness_m: Optional[Real] = Field(default=None, gt=0, le=0.05)
+    pitch_deg: Optional[Union[Real, list[Real]]] = None
+    height_m: Optional[Real] = Field(default=None, gt=0, le=0.5)
+    material: Optional[str] = None
+
+
+class TwinFeed(StrictModel):
+    """`feed` keys of the second disc (null: the first disc's; the angle mirrored, 180 deg - angle)."""
+
+    radius_m: Optional[Real] = Field(default=None, ge=0, le=2.0)
+    angle_deg: Optional[Real] = Field(default=None, ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG,
+                                      description="about the second disc's axis, from +x, ccw")
+    spread_m: Optional[Real] = Field(default=None, ge=0, le=2.0)
+    drop_height_m: Optional[Real] = Field(default=None, ge=0, le=1.0)
+
+
+class Twin(StrictModel):
+    """A second disc. `spinner`, `vanes`, `feed` of the scene describe the first disc, on the
+    right of the track at x = +spacing/2; the second, at x = -spacing/2, is its mirror
+    image unless the keys here say otherwise. Both throw through the same plates."""
+
+    spacing_m: Real = Field(gt=0, le=MAX_SPACING_M, description="distance between the disc axes, across the track")
+    spinner: TwinSpinner = TwinSpinner()
+    vanes: TwinVanes = TwinVanes()
+    feed: TwinFeed = TwinFeed()
+
+
 class Scene(StrictModel):
     name: str
     description: str = ""
@@ -187,45 +232,114 @@ class Scene(StrictModel):
     granule: Granule = Granule()
     contact: Contact = Contact()
     deflectors: list[Deflector] = Field(default_factory=list)
+    twin: Optional[Twin] = Field(default=None, description="a second disc (null: one disc)")
     flight: Flight = Flight()
     pattern: Pattern
     sim: Sim
 
     @model_validator(mode="after")
     def _geometry(self) -> "Scene":
-        radius = self.spinner.radius_m
-        outer = self.vane_outer_radius_m
-        if outer > radius + 1e-12:
-            raise ValueError(f"vanes.outer_radius_m: {outer} m is longer than the disc radius {radius} m")
-        if self.vanes.inner_radius_m >= outer:
-            raise ValueError(
-                f"vanes.inner_radius_m: {self.vanes.inner_radius_m} m must be below the outer radius {outer} m"
-            )
-        tip_speed = abs(self.spinner.omega_rad_s) * radius
-        if tip_speed > MAX_TIP_SPEED_M_S:
-            raise ValueError(f"spinner.rpm: {self.spinner.rpm:g} rpm on a {radius:g} m disc is a rim speed of "
-                             f"{tip_speed:.0f} m/s; allowed up to {MAX_TIP_SPEED_M_S:g} m/s")
-        if self.feed.spread_m > radius:
-            raise ValueError(f"feed.spread_m: {self.feed.spread_m:g} m is wider than the disc radius {radius:g} m")
-        if self.feed.radius_m >= radius:
-            raise ValueError(f"feed.radius_m: {self.feed.radius_m} m must be inside the disc radius {radius} m")
-        if self.feed.radius_range_m is not None and not (0.0 <= self.feed.radius_range_m[0]
-                                                         and self.feed.radius_range_m[1] < radius):
-            lo, hi = self.feed.radius_range_m
-            raise ValueError(f"feed.radius_range_m: [{lo:g}, {hi:g}] m must lie within [0, {radius:g}) m, "
-                             "inside the disc")
+        _check_disc(self.spinner, self.vanes, self.feed, "")
+        centres = self.disc_centres_m
+        radii = [self.spinner.radius_m]
+        if self.twin is not None:
+            second = self.second_disc()
+            _check_disc(*second, "twin.")
+            radii.append(second[0].radius_m)
+            least = radii[0] + radii[1]
+            if self.twin.spacing_m <= least:
+                raise ValueError(f"twin.spacing_m: {self.twin.spacing_m:g} m puts the discs (radii {radii[0]:g} m, "
+                                 f"{radii[1]:g} m) over each other; allowed: > {least:g} m, <= {MAX_SPACING_M:g} m")
         for i, plate in enumerate(self.deflectors):
-            if _segment_distance_to_origin(*plate.endpoints()) <= radius:
-                raise ValueError(f"deflectors[{i}]: the plate reaches inside the disc radius {radius} m")
+            for (cx, cy), radius in zip(centres, radii):
+                a, b = plate.endpoints()
+                if _segment_distance_to_origin((a[0] - cx, a[1] - cy), (b[0] - cx, b[1] - cy)) <= radius:
+                    where = f"the disc at x = {cx:g} m" if self.twin is not None else "the disc"
+                    raise ValueError(f"deflectors[{i}]: the plate reaches inside {where} (radius {radius} m); "
+                                     f"plates must stay outside every disc")
         return self
 
     @property
     def vane_outer_radius_m(self) -> float:
-        return self.vanes.outer_radius_m if self.vanes.outer_radius_m is not None else self.spinner.radius_m
+        return _vane_outer_radius_m(self.spinner, self.vanes)
 
     @property
     def vane_material(self) -> str:
         return self.vanes.material or self.spinner.material
+
+    @property
+    def disc_centres_m(self) -> list[tuple[float, float]]:
+        """Disc axes in the machine frame (m): (0, 0) for one disc; with `twin`, the first
+        disc at (+spacing/2, 0), right of the track, and the second at (-spacing/2, 0)."""
+        if self.twin is None:
+            return [(0.0, 0.0)]
+        half = 0.5 * self.twin.spacing_m
+        return [(half, 0.0), (-half, 0.0)]
+
+    def second_disc(self) -> tuple[Spinner, Vanes, Feed]:
+        """The second disc of a twin scene: the first disc's mirror image across the
+        machine's centreline (opposite sense of rotation, feed angle 180 deg - angle, the
+        per-vane pitches in mirrored order), with the keys `twin` sets replacing these."""
+        if self.twin is None:
+            raise ValueError("twin: this scene has one disc")
+        spinner, vanes, feed = mirror_disc(self.spinner, self.vanes, self.feed)
+        return (_merged(Spinner, spinner, self.twin.spinner, "twin.spinner"),
+                _merged(Vanes, vanes, self.twin.vanes, "twin.vanes"), _merged(Feed, feed, self.twin.feed, "twin.feed"))
+
+
+def mirror_disc(spinner: Spinner, vanes: Vanes, feed: Feed) -> tuple[Spinner, Vanes, Feed]:
+    """The mirror image (x -> -x) of a disc about its own axis.
+
+    Vane k stands at angle 2 pi k / N with its pitch leaning in the direction of
+    rotation, so the mirror keeps every pitch and reverses the order of the vanes after
+    the first (vane k of the mirror is vane N - k of the original)."""
+    pitch = vanes.pitch_deg
+    if isinstance(pitch, list):
+        pitch = [pitch[0], *pitch[:0:-1]]
+    mirrored_angle = 180.0 - feed.angle_deg
+    if mirrored_angle > MAX_ANGLE_DEG:
+        mirrored_angle -= 360.0
+    return (spinner.model_copy(update={"direction": "cw" if spinner.direction == "ccw" else "ccw"}),
+            vanes.model_copy(update={"pitch_deg": pitch}),
+            feed.model_copy(update={"angle_deg": mirrored_angle}))
+
+
+def _merged(model: type[ModelT], base: StrictModel, overrides: StrictModel, key: str) -> ModelT:
+    """`base` with the keys `overrides` sets (non-null), validated as `model`; a problem
+    is a ValueError naming the key under `key`."""
+    changes = {k: v for k, v in overrides.model_dump().items() if v is not None}
+    try:
+        return model.model_validate({**base.model_dump(), **changes})
+    except ValidationError as exc:
+        raise ValueError(f"{key}.{format_validation_error(exc, model, key)}") from None
+
+
+def _vane_outer_radius_m(spinner: Spinner, vanes: Vanes) -> float:
+    return vanes.outer_radius_m if vanes.outer_radius_m is not None else spinner.radius_m
+
+
+def _check_disc(spinner: Spinner, vanes: Vanes, feed: Feed, prefix: str) -> None:
+    """The checks within one disc; `prefix` ("" or "twin.") names the keys of the second disc."""
+    radius = spinner.radius_m
+    outer = _vane_outer_radius_m(spinner, vanes)
+    if outer > radius + 1e-12:
+        raise ValueError(f"{prefix}vanes.outer_radius_m: {outer} m is longer than the disc radius {radius} m")
+    if vanes.inner_radius_m >= outer:
+        raise ValueError(
+            f"{prefix}vanes.inner_radius_m: {vanes.inner_radius_m} m must be below the outer radius {outer} m"
+        )
+    tip_speed = spinner.rpm * RPM_TO_RAD_S * radius
+    if tip_speed > MAX_TIP_SPEED_M_S:
+        raise ValueError(f"{prefix}spinner.rpm: {spinner.rpm:g} rpm on a {radius:g} m disc is a rim speed of "
+                         f"{tip_speed:.0f} m/s; allowed up to {MAX_TIP_SPEED_M_S:g} m/s")
+    if feed.spread_m > radius:
+        raise ValueError(f"{prefix}feed.spread_m: {feed.spread_m:g} m is wider than the disc radius {radius:g} m")
+    if feed.radius_m >= radius:
+        raise ValueError(f"{prefix}feed.radius_m: {feed.radius_m} m must be inside the disc radius {radius} m")
+    if feed.radius_range_m is not None and not (0.0 <= feed.radius_range_m[0] and feed.radius_range_m[1] < radius):
+        lo, hi = feed.radius_range_m
+        raise ValueError(f"{prefix}feed.radius_range_m: [{lo:g}, {hi:g}] m must lie within [0, {radius:g}) m, "
+                         "inside the disc")
 
 
 def _segment_distance_to_origin(a: tuple[float, float], b: tuple[float, float]) -> float:

@@ -17,8 +17,8 @@ from spreadgym.config.scene import Scene
 from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import GranuleBatch, sample_granules
-from spreadgym.physics.selection import SPINNER_MODELS, choose_model
-from spreadgym.spread import estimate, pattern
+from spreadgym.physics.selection import SPINNER_MODELS
+from spreadgym.spread import estimate, pattern, twin
 from spreadgym.spread import flight as flight_model
 from spreadgym.spread.metrics import RunMetrics
 
@@ -59,24 +59,43 @@ def run_scene(
     """Simulate `scene` end to end; the granules are the replicates of sim.seed from `first_replicate`.
 
     `progress(t)` is called with the simulated spinner time (s); `ci` adds the 95 %
-    interval of the CV; `tracks` keeps that many granule paths for pictures.
+    interval of the CV; `tracks` keeps that many granule paths for pictures. A twin
+    scene runs each disc on its own (spreadgym.spread.twin) and scores both discs'
+    landings as one pattern; the result's granule arrays hold the first disc's granules,
+    then the second's, in the machine frame, and `metrics.departure` is the first disc's.
     """
     started = time.perf_counter()
     library = library or load_library()
-    contacts = resolve_contacts(scene, library)
-    chosen, reason = choose_model(scene, model)
+    parts = twin.discs(scene)
+    chosen, reason = twin.choose_for_discs(parts, model)
     fertilizer = library.fertilizer(scene.fertilizer)
-    granules = sample_granules(scene, fertilizer, scene.sim.replicates, first_replicate)
-
-    departure = run_spinner(scene, granules, contacts, chosen, progress, tracks)
-    launch = SPINNER_MODELS[chosen].deflect(departure, scene, contacts, granules)
+    throws: list[twin.Throw] = []
+    for disc in parts:
+        if throws and twin.is_mirror_image(parts[0].scene, disc.scene):
+            throws.append(twin.mirrored(throws[0]))
+            continue
+        granules = sample_granules(disc.scene, fertilizer, scene.sim.replicates, first_replicate)
+        contacts = resolve_contacts(disc.scene, library)
+        departure = run_spinner(disc.scene, granules, contacts, chosen, progress, tracks)
+        launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
+        throws.append(twin.Throw(granules, departure, launch))
+    # every disc flies in its own frame; the pattern is in the machine frame
+    local = twin.combined(throws)
+    placed = [twin.moved(t, d.centre_m) for t, d in zip(throws, parts)]
+    machine = twin.combined(placed)
+    granules, departure, launch = machine.granules, machine.departure, machine.launch
     flying = launch.departed
-    velocity3 = np.column_stack([launch.velocity_m_s[flying], launch.vertical_velocity_m_s[flying]])
-    height = np.maximum(scene.spinner.height_m + launch.height_m[flying], 0.0)
+    counts = [t.granules.count for t in throws]
+    disc_height = np.repeat([d.scene.spinner.height_m for d in parts], counts)[flying]
+    velocity3 = np.column_stack([local.launch.velocity_m_s[flying], local.launch.vertical_velocity_m_s[flying]])
+    height = np.maximum(disc_height + local.launch.height_m[flying], 0.0)
     landing = flight_model.fly(
-        launch.position_m[flying], height, velocity3, granules.diameter_m[flying],
+        local.launch.position_m[flying], height, velocity3, granules.diameter_m[flying],
         granules.density_kg_m3, scene.flight,
     )
+    if scene.twin is not None:
+        centre = np.repeat(np.asarray([d.centre_m for d in parts]), counts, axis=0)[flying]
+        landing = flight_model.Landing(landing.position_m + centre, landing.time_s)
     landed_mass = granules.mass_kg[flying]
     p = scene.pattern
     trays, replicate_masses = estimate.replicate_tray_masses(
@@ -92,7 +111,7 @@ def run_scene(
         dt_s=departure.dt_s if departure.dt_s > 0.0 else None,  # None: closed forms, no step
         granules=granules.count,
         outcomes=departure.outcome_counts(),
-        departure=departure_summary(departure, scene.spinner.omega_rad_s),
+        departure=departure_summary(throws[0].departure, scene.spinner.omega_rad_s),
         target_swath_m=p.target_swath_m,
         driving=p.driving,
         tray_width_m=p.tray_width_m,
@@ -107,7 +126,7 @@ def run_scene(
         trays=trays,
         released_kg=float(granules.mass_kg.sum()),
         retained_kg=float(granules.mass_kg[~departure.departed].sum()),
-        notes=_notes(scene, chosen, departure, launch, trays),
+        notes=_notes(scene, chosen, departure, launch, trays) + twin.crossing_notes(placed, parts),
         wall_s=time.perf_counter() - started,
     )
     return SimulationResult(scene, granules, departure, launch, landing, trays, replicate_masses, metrics)
