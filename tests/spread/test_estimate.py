@@ -85,3 +85,27 @@ def test_pooled_trays_equal_the_sum_of_the_replicates():
 def test_empty_pattern_has_no_cv():
     result = estimate.estimate_cv(np.zeros((4, 21)), TRAY_M, 3.0, "racetrack")
     assert result == estimate.CvEstimate(None, None, None, None)
+
+
+def per_width_curve(masses, driving, widths):
+    """The reference: `estimate_cv` at each width in turn."""
+    found = [estimate.estimate_cv(masses, TRAY_M, w, driving) for w in widths]
+    return (np.array([np.nan if e.cv_percent is None else e.cv_percent for e in found]),
+            np.array([np.nan if e.standard_error_percent is None else e.standard_error_percent for e in found]))
+
+
+@pytest.mark.parametrize("driving", pattern.DRIVING)
+@pytest.mark.parametrize("replicates", [1, 2, 3, 8])
+def test_cv_curve_in_one_pass_equals_estimate_cv_width_by_width(driving, replicates):
+    rng = np.random.default_rng(replicates)
+    widths = np.arange(1, 32) * TRAY_M
+    cases = [rng.random((replicates, 31)) * (rng.random((replicates, 31)) > 0.3),  # gaps
+             np.zeros((replicates, 31))]  # nothing landed
+    alone = np.zeros((replicates, 31))
+    alone[0, 10:14] = 1.0  # one replicate holds all the mass: no correction, no error
+    cases.append(alone)
+    for masses in cases:
+        for got, want in zip(estimate.cv_curve(masses, TRAY_M, driving, widths),
+                             per_width_curve(masses, driving, widths)):
+            assert np.array_equal(np.isnan(got), np.isnan(want))
+            np.testing.assert_allclose(got[~np.isnan(got)], want[~np.isnan(want)], rtol=1e-12, atol=1e-12)

@@ -12,20 +12,20 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from spreadgym.physics.compiled.layout import KERNEL
 
 SPEED_FLOOR_M_S = 1e-12
 """Below this relative speed the disc drag is static (it balances the other forces up to mu_d g)."""
 
 
-@njit(cache=True)
+@KERNEL
 def frame_acceleration(cx, cy, vx, vy, omega):
     """Centrifugal plus Coriolis acceleration (m/s^2) at position c, rotating-frame velocity v."""
     om2 = omega * omega
     return om2 * cx + 2.0 * omega * vy, om2 * cy - 2.0 * omega * vx
 
 
-@njit(cache=True)
+@KERNEL
 def free_acceleration(cx, cy, vx, vy, omega, drag):
     """Acceleration off the vanes; `drag` = mu_d g on the disc, 0 in the air."""
     ax, ay = frame_acceleration(cx, cy, vx, vy, omega)
@@ -43,7 +43,7 @@ def free_acceleration(cx, cy, vx, vy, omega, drag):
     return ax, ay
 
 
-@njit(cache=True)
+@KERNEL
 def impact(vx, vy, s, nx, ny, radius, omega, restitution, mu, inv_kappa):
     """Impact on a surface of outward normal n: restitution on the approach speed and a
     Coulomb tangential impulse (at most mu times the normal impulse) that stops the slip
@@ -67,7 +67,7 @@ def impact(vx, vy, s, nx, ny, radius, omega, restitution, mu, inv_kappa):
     return vx, vy, s, approach
 
 
-@njit(cache=True)
+@KERNEL
 def disc_drag_impulse(vx, vy, impulse):
     """Velocity after a disc impact's friction impulse (per mass, mu J_n), never reversing v."""
     speed = math.sqrt(vx * vx + vy * vy)

@@ -17,12 +17,11 @@ the end of the flat face (tip or inner end), the centre reaching the disc radius
 
 from __future__ import annotations
 
-from numba import njit
-
 from spreadgym.physics.compiled.layout import (
     DISC_RADIUS,
     GRAVITY,
     INV_KAPPA,
+    KERNEL,
     MU_DISC,
     MU_VANE,
     NX,
@@ -43,7 +42,7 @@ RIM = 5
 EVENTS = 5
 
 
-@njit(cache=True)
+@KERNEL
 def face_frame(vane, side, reach, V):
     """(px, py, ux, uy, nfx, nfy, q) of one face of a vane, for the centre line at `reach`."""
     nfx, nfy = side * V[vane, NX], side * V[vane, NY]
@@ -52,7 +51,7 @@ def face_frame(vane, side, reach, V):
     return V[vane, PX] + reach * nfx, V[vane, PY] + reach * nfy, ux, uy, nfx, nfy, q
 
 
-@njit(cache=True)
+@KERNEL
 def forces(x, xd, s, sticking, eps, drag_sign, frame, radius, P):
     """(x'', s', N, f, G): acceleration along the face, spin rate, normal force, vane
     friction and the along-face force without it (all per unit mass)."""
@@ -72,13 +71,13 @@ def forces(x, xd, s, sticking, eps, drag_sign, frame, radius, P):
     return along + f, -q * f * inv_kappa / radius, normal, f, along
 
 
-@njit(cache=True)
+@KERNEL
 def slip(xd, s, frame, radius, omega):
     """Slip speed of the contact point along u."""
     return xd - frame[6] * radius * (s - omega)
 
 
-@njit(cache=True)
+@KERNEL
 def _rk4(x, xd, s, h, sticking, eps, drag_sign, frame, radius, P):
     a1, w1, _, _, _ = forces(x, xd, s, sticking, eps, drag_sign, frame, radius, P)
     hh = 0.5 * h
@@ -92,7 +91,7 @@ def _rk4(x, xd, s, h, sticking, eps, drag_sign, frame, radius, P):
     return x_new, xd + h6 * (a1 + 2.0 * a2 + 2.0 * a3 + a4), s + h6 * (w1 + 2.0 * w2 + 2.0 * w3 + w4)
 
 
-@njit(cache=True)
+@KERNEL
 def _event_values(out, x, xd, s, sticking, eps, drag_sign, frame, radius, length, P):
     """Event functions (positive while the phase holds) into out[0:EVENTS]."""
     _, _, normal, f, _ = forces(x, xd, s, sticking, eps, drag_sign, frame, radius, P)
@@ -106,7 +105,7 @@ def _event_values(out, x, xd, s, sticking, eps, drag_sign, frame, radius, length
     out[4] = r * r - cx * cx - cy * cy
 
 
-@njit(cache=True)
+@KERNEL
 def step(x, xd, s, h, sticking, eps, drag_sign, frame, radius, length, P, work):
     """Advance up to h s along the face. Returns (x, x', s, time used, event)."""
     start, end = work[0], work[1]

@@ -14,10 +14,8 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from spreadgym.physics.compiled.contact_law import free_acceleration
-from spreadgym.physics.compiled.layout import DISC_RADIUS, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
+from spreadgym.physics.compiled.layout import DISC_RADIUS, KERNEL, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
 
 NONE = 0
 RIM = 1
@@ -27,7 +25,7 @@ REFINE_ITERATIONS = 3
 ON_SURFACE_M = 1e-12  # closer than this to a face line counts as on it (a rebound starts there)
 
 
-@njit(cache=True)
+@KERNEL
 def rk4(cx, cy, vx, vy, h, omega, drag):
     """One fourth-order step of length h (s)."""
     a1x, a1y = free_acceleration(cx, cy, vx, vy, omega, drag)
@@ -44,7 +42,7 @@ def rk4(cx, cy, vx, vy, h, omega, drag):
     return nx, ny, vx + h6 * (a1x + 2.0 * a2x + 2.0 * a3x + a4x), vy + h6 * (a1y + 2.0 * a2y + 2.0 * a3y + a4y)
 
 
-@njit(cache=True)
+@KERNEL
 def _event_value(kind, vane, side, cx, cy, reach, P, V):
     """Event function (positive before, negative after) of a rim or face crossing."""
     if kind == RIM:
@@ -57,14 +55,14 @@ def _event_value(kind, vane, side, cx, cy, reach, P, V):
     return side * d - reach
 
 
-@njit(cache=True)
+@KERNEL
 def end_point(vane, end, V):
     """Inner end (end 0) or tip (end 1) of a vane's centre line."""
     length = end * V[vane, LENGTH]
     return V[vane, PX] + length * V[vane, UX], V[vane, PY] + length * V[vane, UY]
 
 
-@njit(cache=True)
+@KERNEL
 def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     """Advance up to h s. Returns (cx, cy, vx, vy, time used, event, vane, side);
     side +1 is the leading face, -1 the trailing face; `reach` = granule radius + half
@@ -77,8 +75,8 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     if g1 < 0.0:
         best, kind = max(g0, 0.0) / (max(g0, 0.0) - g1), RIM
     lo, g_lo = 0.0, max(g0, 0.0)
+    near = (1.001 * reach) ** 2  # squared distance beyond which an end cap is surely not reached
     if below:
-        ax, ay = free_acceleration(cx, cy, vx, vy, omega, drag)
         for k in range(V.shape[0]):
             for sd in (1.0, -1.0):
                 g0 = _event_value(FACE, k, sd, cx, cy, reach, P, V)
@@ -89,6 +87,7 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                 if g0 <= ON_SURFACE_M:
                     # on the face at the start (a rebound): the return, bracketed from the
                     # lower half of the parabola g = vn t - press t^2 / 2
+                    ax, ay = free_acceleration(cx, cy, vx, vy, omega, drag)
                     vn = sd * (vx * V[k, NX] + vy * V[k, NY])
                     press = -sd * (ax * V[k, NX] + ay * V[k, NY])
                     if vn <= 0.0 or press <= 0.0:
@@ -107,6 +106,9 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                 if 0.0 <= x <= V[k, LENGTH]:
                     best, kind, vane, side, lo, g_lo = f, FACE, k, sd, f_lo, g0
             for end in (0.0, 1.0):
+                px, py = end_point(k, end, V)
+                if (ex - px) ** 2 + (ey - py) ** 2 >= near:
+                    continue  # g1 > 0 without the square root: no crossing
                 g0 = _event_value(END_CAP, k, end, cx, cy, reach, P, V)
                 g1 = _event_value(END_CAP, k, end, ex, ey, reach, P, V)
                 if g0 > ON_SURFACE_M and g1 < 0.0:
@@ -138,7 +140,7 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     return sx, sy, svx, svy, f * h, kind, vane, side
 
 
-@njit(cache=True)
+@KERNEL
 def overlap(cx, cy, reach, V):
     """First vane the granule overlaps: (vane, side, outward normal x, y, depth) with
     side +1/-1 for the leading/trailing flat face, 0 for a rounded end; vane -1 if none."""

@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from spreadgym.physics.compiled import face_motion, free_motion, vertical_events
 from spreadgym.physics.compiled.contact_law import disc_drag_impulse, frame_acceleration, impact
@@ -33,6 +32,7 @@ from spreadgym.physics.compiled.layout import (
     GRAVITY,
     HALF_THICKNESS,
     INV_KAPPA,
+    KERNEL,
     LENGTH,
     MU_DISC,
     MU_VANE,
@@ -55,7 +55,7 @@ CX, CY, VX, VY, SPIN, Z, VZ, TIME, STALLED = range(9)
 OUT_SIZE = 9
 
 
-@njit(cache=True)
+@KERNEL
 def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
     """Impact on a surface of normal n; (vx, vy, s, stays in contact). A rebound whose
     flight back (2 e a / press) would be shorter than P[REBOUND_FLIGHT] ends the
@@ -73,7 +73,7 @@ def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
     return bx, by, bs, False
 
 
-@njit(cache=True)
+@KERNEL
 def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, slip_is_zero):
     """(sticking, eps, x') for a granule on a face: it rolls (no slip) if it does not slip
     and friction can hold that; otherwise it slides against its slip. `slip_is_zero`:
@@ -91,7 +91,7 @@ def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, slip_is_zero):
     return False, -math.copysign(1.0, f), xd
 
 
-@njit(cache=True)
+@KERNEL
 def _drag_sign(x, xd, frame, resting, P):
     """Direction of the disc's drag along the face (0 in the air); at x' = 0 it opposes the pull."""
     if not resting:
@@ -103,7 +103,7 @@ def _drag_sign(x, xd, frame, resting, P):
     return math.copysign(1.0, pull)
 
 
-@njit(cache=True)
+@KERNEL
 def run_one(cx, cy, radius, z, vz, P, V, out, track):
     """Follow one granule (start at rest in the machine frame at (cx, cy), base height z,
     vertical speed vz); write its final state into `out`, its path into `track`
@@ -223,7 +223,7 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
     return outcome
 
 
-@njit(cache=True)
+@KERNEL
 def run_all(start, radius, z0, vz0, P, V, out, outcome, tracks):
     """Every granule in turn; tracks (k, T, 3) for the first k granules."""
     empty = np.empty((0, 3))

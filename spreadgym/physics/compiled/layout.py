@@ -9,11 +9,17 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from spreadgym.config.scene import Scene
 from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.contacts import Contacts
 from spreadgym.physics.geometry import vane_segments
+
+KERNEL = njit(cache=True, error_model="numpy")
+"""The compile options of every kernel. error_model="numpy": a division by zero gives
+inf/nan instead of raising, so no check is compiled into each division; every division
+that would not have raised gives the same bits (no fastmath: results stay exact IEEE)."""
 
 # Indices into P.
 OMEGA = 0  # signed spinner angular velocity, rad/s
