@@ -75,7 +75,7 @@ def run_scene(
     height = np.maximum(scene.spinner.height_m + launch.height_m[flying], 0.0)
     landing = flight_model.fly(
         launch.position_m[flying], height, velocity3, granules.diameter_m[flying],
-        granules.density_kg_m3, scene.flight,
+        granules.density_kg_m3, scene.flight, spin_rad_s=launch.spin_rad_s[flying],
     )
     landed_mass = granules.mass_kg[flying]
     p = scene.pattern
