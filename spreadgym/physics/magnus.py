@@ -11,18 +11,18 @@ Lift (per unit mass), along omega x v_rel:
     C_L = C_max x / (1 + x^4)^(1/4),   x = S / S_sat,   C_max = 0.37, S_sat = 0.34
 
 Source: Zhou, Zhang & Xu (2022), "Experiments on drag and lift coefficients of a
-spinning sphere", Water 14: smooth spheres, 610 < Re < 3472, 0.149 < Rr < 3.471
-(Rr = d |omega| / |v_rel| = 2 S). Above a critical Re the lift coefficient no longer
-depends on Re and takes a limit value: 0.37 for 1 < Rr < 12, rising with Rr below
-Rr = 1. The curve above is our reading of that: a linear rise C_max S / S_sat joined
+spinning sphere", Water (MDPI, 2022): smooth spheres, 610 < Re < 3472, 0.149 < Rr < 3.471
+(Rr = d |omega| / |v_rel| = 2 S). C_L falls as Re grows up to a critical Re and is
+independent of Re above it; that limit value is 0.37 for 1 < Rr < 12 and rises with Rr
+below Rr = 1. The curve above is our reading of it: a linear rise C_max S / S_sat joined
 smoothly to the plateau (a corner would cost the adaptive integrator rejected steps at
-every crossing), with S_sat = 0.34 so that C_L is within 5 % of 0.37 from Rr = 1 on;
-its initial slope, C_L = 0.54 Rr, stays below the Stokes-flow C_L = Rr of Rubinow &
-Keller 1961 (J. Fluid Mech. 11:447), as the lift falls with Re below the critical Re. Spreader granules launch at S 0.4-0.65 (Rr 0.8-1.3) and
-Re ~1000-8000: Re above 3500 is an extrapolation along the Re-independent plateau;
-the critical Re of the drag crisis (~2e5, where the lift can reverse: Kim et al.
-2014, J. Fluid Mech. 754:R2) is far away. Using the transverse spin |omega x v_rel| /
-|v_rel| in S makes the force vanish smoothly when v_rel turns vertical.
+every crossing), S_sat = 0.34 putting C_L within 5 % of 0.37 from Rr = 1 on. Its
+initial slope, C_L = 0.54 Rr, stays below the Stokes-flow lift C_L = Rr (Rubinow &
+Keller 1961, J. Fluid Mech. 11:447), as the fall with Re implies. Spreader granules
+launch at S 0.4-0.65 (Rr 0.8-1.3) and Re ~1000-8000: Re above 3500 extrapolates the
+Re-independent plateau; the drag crisis (Re ~2e5, where the lift can reverse: Kim et
+al. 2014, J. Fluid Mech. 754:R2) is far away. Using the transverse spin
+|omega x v_rel| / |v_rel| in S makes the force vanish smoothly as v_rel turns vertical.
 
 Spin decay, I d omega/dt = -T with I = kappa m r^2 and the torque on a sphere rotating
 in still air (Dennis, Singh & Ingham 1980, J. Fluid Mech. 101:257; the fit as used in

@@ -32,10 +32,9 @@ arithmetic is exactly that of the drag-only model.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Optional
-
-import math
 
 import numpy as np
 from numba import njit
