@@ -179,7 +179,7 @@ def _magnus_accel(v, k, t, wind_x, wind_y, g, out):
         rx, ry, rz = v[0, j] - wind_x, v[1, j] - wind_y, v[2, j]
         speed2 = rx * rx + ry * ry + rz * rz
         minus_ks = -k[0, j] * math.sqrt(speed2)
-        x = c[j] * math.sqrt(rx * rx + ry * ry) / speed2
+        x = c[j] * math.sqrt(rx * rx + ry * ry) / max(speed2, 1e-300)  # r = 0 (at rest in the wind): no lift
         x *= x
         f = k[1, j] * c[j] / math.sqrt(math.sqrt(1.0 + x * x))
         out[0, j] = minus_ks * rx - f * ry
@@ -202,6 +202,7 @@ def _lift_acts(flight: Flight, spin: np.ndarray) -> bool:
 
 
 def _stage_times(model: _Model, t, h, fraction: float):
+    """Times of a Runge-Kutta stage (n,), or None for a model that does not use them."""
     return t + fraction * h if model.uses_time else None
 
 
