@@ -15,7 +15,7 @@ from spreadgym.cli import arguments
 from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
-            "stability")
+            "stability", "magnus")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +35,7 @@ def write_csv(rows: list[dict], path: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from spreadgym.errors import SpreadgymError
-    from spreadgym.studies import benchmarks, estimate_bench, fidelity, references, speed_accuracy, stability
+    from spreadgym.studies import benchmarks, estimate_bench, fidelity, magnus, references, speed_accuracy, stability
 
     if args.repeats < 1:
         raise SpreadgymError(f"--repeats: {args.repeats} must be at least 1")
@@ -57,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
         "speed-accuracy": lambda: speed_accuracy.speed_accuracy_rows(args.out / "references", progress=say),
         "stability": lambda: stability.stability_rows(
             stability.plot_stability_map(args.out.parent / "stability_map.png")),
+        "magnus": lambda: magnus.magnus_rows(args.out.parent / "magnus" / "magnus_effect.png",
+                                             repeats=max(args.repeats, 15), progress=say),
     }
     plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy}
     for name in sections:

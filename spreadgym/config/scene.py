@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal, Mapping, Optional, TypeVar, Union
 
-from pydantic import Field, ValidationError, model_validator
+from pydantic import Field, Strict, ValidationError, model_validator
 
 from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error, validate
 from spreadgym.config.overrides import apply_overrides
@@ -149,6 +149,12 @@ class Flight(StrictModel):
     air_density_kg_m3: Real = Field(default=1.2, ge=0, le=2.0)
     forward_speed_m_s: Real = Field(default=0.0, ge=0, le=20.0, description="machine speed along +y")
     wind_m_s: tuple[WindComponent, WindComponent] = Field(default=(0.0, 0.0), description="wind (x, y) over ground")
+    magnus: Annotated[bool, Strict()] = Field(default=False, description="keep the departure spin in flight: "
+                                              "Magnus lift and air-torque spin decay (docs/magnus.md)")
+    lift_coefficient_max: Real = Field(default=0.37, ge=0, le=1.0, description="Magnus lift coefficient plateau")
+    lift_saturation_spin_parameter: Real = Field(
+        default=0.34, gt=0, le=5.0, description="spin parameter (r omega / v_rel) at the knee of the lift curve")
+    air_viscosity_pa_s: Real = Field(default=1.81e-5, gt=0, le=1e-3, description="dynamic viscosity (spin decay)")
 
 
 class Pattern(StrictModel):

@@ -21,18 +21,28 @@ on the Runge-Kutta step length (started from a cubic Hermite guess), so the land
 point carries no interpolation error. `dt_s=<float>` runs the classical fixed-step
 RK4 instead (kept for comparisons and benchmarks). `reference_landing` solves the
 same model one granule at a time with scipy's DOP853 at tight tolerance.
+
+With `flight.magnus` on, a granule keeps its departure spin about the vertical axis
+and meets a horizontal Magnus lift sideways to its velocity; the spin decays by air
+torque (`spreadgym.physics.magnus`: the law, its sources and ranges). The spin has a
+closed form in time, so the Runge-Kutta stages still carry velocities only and the
+acceleration is evaluated at each stage's time. With it off (the default) the
+arithmetic is exactly that of the drag-only model.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+from numba import njit
 from scipy.integrate import solve_ivp
 
 from spreadgym.config.scene import Flight
 from spreadgym.errors import ConfigError
+from spreadgym.physics import magnus
 from spreadgym.physics.constants import GRAVITY_M_S2
 
 # Local error tolerance of the adaptive method, per step and per granule: absolute
@@ -53,6 +63,7 @@ _DP_A = [
     np.array([9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656]),
     np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84]),
 ]
+_DP_C = [0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0]  # stage times as fractions of the step
 _DP_B = _DP_A[6]  # 5th-order weights (= last row: FSAL)
 _DP_E = np.array(  # 5th minus 4th order weights: the error estimate
     [
@@ -89,7 +100,7 @@ def terminal_speed_m_s(diameter_m, density_kg_m3, flight: Flight, gravity_m_s2: 
         return np.sqrt(gravity_m_s2 / k)
 
 
-def _check_inputs(position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2):
+def _check_inputs(position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2, spin_rad_s=None):
     pos = np.asarray(position_m, dtype=float)
     if pos.ndim != 2 or pos.shape[1] != 2:
         raise ConfigError("position_m", f"expected shape (N, 2), got {pos.shape}")
@@ -100,7 +111,10 @@ def _check_inputs(position_m, height_m, velocity_m_s, diameter_m, density_kg_m3,
     height = np.broadcast_to(np.asarray(height_m, dtype=float), (n,)).copy()
     diameter = np.broadcast_to(np.asarray(diameter_m, dtype=float), (n,)).copy()
     density = np.broadcast_to(np.asarray(density_kg_m3, dtype=float), (n,)).copy()
-    for key, arr in (("position_m", pos), ("velocity_m_s", vel), ("spinner.height_m", height)):
+    spin = np.zeros(n) if spin_rad_s is None else np.asarray(spin_rad_s, dtype=float)
+    if spin.shape != (n,):
+        raise ConfigError("spin_rad_s", f"expected shape ({n},), got {spin.shape}")
+    for key, arr in (("position_m", pos), ("velocity_m_s", vel), ("spinner.height_m", height), ("spin_rad_s", spin)):
         if not np.all(np.isfinite(arr)):
             raise ConfigError(key, "must be finite (got NaN or inf)")
     if np.any(height < 0):
@@ -111,19 +125,21 @@ def _check_inputs(position_m, height_m, velocity_m_s, diameter_m, density_kg_m3,
         raise ConfigError("fertilizer.density_kg_m3", "particle densities must be finite and > 0 kg/m3")
     if not (np.isfinite(gravity_m_s2) and gravity_m_s2 > 0):
         raise ConfigError("gravity_m_s2", f"must be > 0, got {gravity_m_s2}")
-    return pos, height, vel, diameter, density
+    return pos, height, vel, diameter, density, spin
 
 
 class _Model:
     """Acceleration of the granules; it depends on the velocity only (not on the
     position), so Runge-Kutta stages need the velocity stages only and positions
-    follow as x + h * sum(b_i V_i)."""
+    follow as x + h * sum(b_i V_i). `k`: the per-granule drag constant K (n,)."""
+
+    uses_time = False  # the acceleration does not depend on the time since launch
 
     def __init__(self, gravity: float, wind_xy: tuple[float, float]):
         self.g = float(gravity)
         self.wind = np.array([float(wind_xy[0]), float(wind_xy[1]), 0.0])[:, None]
 
-    def accel(self, v: np.ndarray, k: np.ndarray, out: np.ndarray) -> np.ndarray:
+    def accel(self, v: np.ndarray, k: np.ndarray, out: np.ndarray, t=None) -> np.ndarray:
         """a = g - K |v - w| (v - w) for velocities v (3, n); written into out (3, n)."""
         r = v - self.wind
         minus_ks = np.sqrt(np.einsum("ij,ij->j", r, r))
@@ -133,9 +149,66 @@ class _Model:
         return out
 
 
-def _dp_step(model: _Model, x, v, k, h, a1):
+class _MagnusModel(_Model):
+    """Drag plus the Magnus lift of a granule spinning about the vertical axis, whose
+    spin decays in closed form: the acceleration depends on v and the time t since
+    launch. `k` (10, n): K, signed lift factor sign(omega) (3/8)(rho/rho_p) C_max / r,
+    r / S_sat, and the spin table of `magnus.spin_table` (7 rows)."""
+
+    uses_time = True
+
+    def accel(self, v: np.ndarray, k: np.ndarray, out: np.ndarray, t=None) -> np.ndarray:
+        """Drag and gravity as `_Model` plus the Magnus lift (`_magnus_accel`), into out (3, n)."""
+        _magnus_accel(v, k, t, self.wind[0, 0], self.wind[1, 0], self.g, out)
+        return out
+
+
+@njit(cache=True, error_model="numpy")
+def _magnus_accel(v, k, t, wind_x, wind_y, g, out):
+    """a = g - K |r| r + lift C_L(S) |r|^2 (omega x r)/|omega x r| per granule (r = v - w,
+    r_h its horizontal part; compiled, as the lift adds ~20 array operations).
+    With omega vertical, S = c r_h / |r|^2 for c = r |omega| / S_sat, so
+    C_L |r|^2 / r_h = C_max c / (1 + x^4)^(1/4), x = S / S_sat: no division by r_h, and
+    the force fades smoothly as the flight turns vertical."""
+    n = v.shape[1]
+    table = k[3:]
+    c = np.empty(n)
+    for j in range(n):  # the spin (a libm call): kept out of the loop below so that it vectorises
+        c[j] = k[2, j] * magnus.spin_size(t[j], table, j)
+    for j in range(n):
+        rx, ry, rz = v[0, j] - wind_x, v[1, j] - wind_y, v[2, j]
+        speed2 = rx * rx + ry * ry + rz * rz
+        minus_ks = -k[0, j] * math.sqrt(speed2)
+        x = c[j] * math.sqrt(rx * rx + ry * ry) / max(speed2, 1e-300)  # r = 0 (at rest in the wind): no lift
+        x *= x
+        f = k[1, j] * c[j] / math.sqrt(math.sqrt(1.0 + x * x))
+        out[0, j] = minus_ks * rx - f * ry
+        out[1, j] = minus_ks * ry + f * rx
+        out[2, j] = minus_ks * rz - g
+
+
+def _magnus_parameters(k_drag, diameter, density, spin, flight: Flight) -> np.ndarray:
+    """The (10, n) per-granule parameters of `_MagnusModel`."""
+    radius = 0.5 * diameter
+    lift = 0.375 * flight.air_density_kg_m3 * flight.lift_coefficient_max / (density * radius) * np.sign(spin)
+    table = magnus.spin_table(spin, diameter, density, flight.air_density_kg_m3, flight.air_viscosity_pa_s)
+    return np.vstack([k_drag, lift, radius / flight.lift_saturation_spin_parameter, table])
+
+
+def _lift_acts(flight: Flight, spin: np.ndarray) -> bool:
+    """Whether the Magnus lift can move a landing point (else the drag-only model is exact)."""
+    return bool(flight.magnus and flight.air_density_kg_m3 > 0 and flight.lift_coefficient_max > 0
+                and np.any(spin != 0))
+
+
+def _stage_times(model: _Model, t, h, fraction: float):
+    """Times of a Runge-Kutta stage (n,), or None for a model that does not use them."""
+    return t + fraction * h if model.uses_time else None
+
+
+def _dp_step(model: _Model, x, v, k, h, a1, t):
     """One Dormand-Prince 5(4) step of length h (n,) from position x, velocity v
-    (3, n) with first stage a1 = accel(v).
+    (3, n) at time t (n,) with first stage a1 = accel(v, t).
 
     Returns (x_new, v_new, a_new, err_x, err_v); a_new = accel(v_new) (FSAL)."""
     n = v.shape[1]
@@ -146,24 +219,25 @@ def _dp_step(model: _Model, x, v, k, h, a1):
     h3 = np.tile(h, 3)
     for i in range(1, 7):
         vel[i] = vel[0] + h3 * (_DP_A[i] @ acc[:i])
-        model.accel(vel[i].reshape(3, n), k, acc[i].reshape(3, n))
+        model.accel(vel[i].reshape(3, n), k, acc[i].reshape(3, n), _stage_times(model, t, h, _DP_C[i]))
     x_new = x + (h3 * (_DP_B @ vel[:6])).reshape(3, n)
     err_x = (h3 * (_DP_E @ vel)).reshape(3, n)
     err_v = (h3 * (_DP_E @ acc)).reshape(3, n)
     return x_new, vel[6].reshape(3, n).copy(), acc[6].reshape(3, n).copy(), err_x, err_v
 
 
-def _rk4_step(model: _Model, x, v, k, h, a1):
+def _rk4_step(model: _Model, x, v, k, h, a1, t):
     """Classical RK4 step (same stage structure); no error estimate."""
+    half, end = _stage_times(model, t, h, 0.5), _stage_times(model, t, h, 1.0)
     v2 = v + (0.5 * h) * a1
-    a2 = model.accel(v2, k, np.empty_like(v))
+    a2 = model.accel(v2, k, np.empty_like(v), half)
     v3 = v + (0.5 * h) * a2
-    a3 = model.accel(v3, k, np.empty_like(v))
+    a3 = model.accel(v3, k, np.empty_like(v), half)
     v4 = v + h * a3
-    a4 = model.accel(v4, k, np.empty_like(v))
+    a4 = model.accel(v4, k, np.empty_like(v), end)
     x_new = x + (h / 6.0) * (v + 2.0 * (v2 + v3) + v4)
     v_new = v + (h / 6.0) * (a1 + 2.0 * (a2 + a3) + a4)
-    return x_new, v_new, model.accel(v_new, k, np.empty_like(v)), None, None
+    return x_new, v_new, model.accel(v_new, k, np.empty_like(v), end), None, None
 
 
 def _hermite_guess(z0, v0, z1, v1, h):
@@ -182,19 +256,19 @@ def _hermite_guess(z0, v0, z1, v1, h):
     return s
 
 
-def _land(model, step, x0, v0, k, h, a1, z1, vz1):
+def _land(model, step, x0, v0, k, h, a1, z1, vz1, t0):
     """Landing inside a step: solve z(tau) = 0 for the step length tau in (0, h],
     where z(tau) is the Runge-Kutta step itself (so the landing point carries no
     interpolation error). Safeguarded Newton (dz/dtau = vz) with a bracket.
 
-    x0, v0 (3, m): state at the start of the step (z > 0); h (m,): the step that
+    x0, v0 (3, m): state at the start of the step (z > 0), at time t0 (m,); h (m,): the step that
     ended at z1 <= 0 with vertical velocity vz1. Returns (tau, x_land)."""
     lo = np.zeros_like(h)
     hi = h.copy()
     tau = h * _hermite_guess(x0[2], v0[2], z1, vz1, h)
     x_tau = x0
     for _ in range(50):
-        x_tau, v_tau, _, _, _ = step(model, x0, v0, k, tau, a1)
+        x_tau, v_tau, _, _, _ = step(model, x0, v0, k, tau, a1, t0)
         z, vz = x_tau[2], v_tau[2]
         above = z > 0
         lo = np.where(above, tau, lo)
@@ -221,18 +295,20 @@ def fly(
     *,
     atol: float = DEFAULT_ATOL,
     rtol: float = DEFAULT_RTOL,
+    spin_rad_s=None,
 ) -> Landing:
     """Fly N granules from their launch state to the ground.
 
     position_m (N, 2): launch point in the machine frame; height_m (N,) or scalar:
     launch height above the ground (>= 0); velocity_m_s (N, 3): launch velocity
-    relative to the machine; diameter_m, density_kg_m3: (N,) or scalars.
-    dt_s None: adaptive Dormand-Prince 5(4) with per-granule steps (local error
-    tolerances atol, rtol); a number: fixed-step RK4 with that step.
+    relative to the machine; diameter_m, density_kg_m3: (N,) or scalars;
+    spin_rad_s (N,): spin about the vertical axis (ccw +), used with `flight.magnus`
+    (None: no spin). dt_s None: adaptive Dormand-Prince 5(4) with per-granule steps
+    (local error tolerances atol, rtol); a number: fixed-step RK4 with that step.
     Granules launched at height 0 land at once (time 0, launch point).
     """
-    pos, height, vel, diameter, density = _check_inputs(
-        position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2
+    pos, height, vel, diameter, density, spin = _check_inputs(
+        position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2, spin_rad_s
     )
     if dt_s is not None and not (np.isfinite(dt_s) and dt_s > 0):
         raise ConfigError("sim.dt_s", f"flight time step must be > 0 s, got {dt_s}")
@@ -245,14 +321,19 @@ def fly(
     idx = np.flatnonzero(height > 0)  # height 0: landed at launch
     if idx.size == 0:
         return Landing(landing_xy, landing_t)
-    model = _Model(gravity_m_s2, flight.wind_m_s)
     k = drag_constant(diameter, density, flight)[idx]
+    if _lift_acts(flight, spin[idx]):
+        model = _MagnusModel(gravity_m_s2, flight.wind_m_s)
+        k = _magnus_parameters(k, diameter[idx], density[idx], spin[idx], flight)
+    else:
+        model = _Model(gravity_m_s2, flight.wind_m_s)
+    k_drag = np.atleast_2d(k)[0]
     # ground-frame state, origin on the spinner axis at launch
     x = np.stack([pos[idx, 0], pos[idx, 1], height[idx]])
     v = np.ascontiguousarray(vel[idx].T)
     v[1] += flight.forward_speed_m_s
     t = np.zeros(idx.size)
-    a1 = model.accel(v, k, np.empty_like(v))
+    a1 = model.accel(v, k, np.empty_like(v), t)
     alive = np.ones(idx.size, dtype=bool)
 
     adaptive = dt_s is None
@@ -261,13 +342,13 @@ def fly(
         # first step: a small part of the drag time scale 1/(K |v - w|) and of the
         # time to fall the launch height from rest; error control does the rest
         rel = np.sqrt(np.einsum("ij,ij->j", v - model.wind, v - model.wind))
-        h = np.minimum(0.05 / (k * rel + 1e-9), np.sqrt(2.0 * x[2] / model.g))
+        h = np.minimum(0.05 / (k_drag * rel + 1e-9), np.sqrt(2.0 * x[2] / model.g))
         h = np.clip(h, 1e-5, 0.05)
     else:
         h = np.full(idx.size, float(dt_s))
 
     for _ in range(_MAX_ITERATIONS):
-        x_new, v_new, a_new, err_x, err_v = step(model, x, v, k, h, a1)
+        x_new, v_new, a_new, err_x, err_v = step(model, x, v, k, h, a1, t)
         if adaptive:
             ratio = np.maximum(
                 np.max(np.abs(err_x) / (atol + rtol * np.maximum(np.abs(x), np.abs(x_new))), axis=0),
@@ -281,8 +362,8 @@ def fly(
             move = alive
         landed = move & (x_new[2] <= 0.0)
         if landed.any():
-            tau, x_land = _land(model, step, x[:, landed], v[:, landed], k[landed], h[landed],
-                                a1[:, landed], x_new[2, landed], v_new[2, landed])
+            tau, x_land = _land(model, step, x[:, landed], v[:, landed], k[..., landed], h[landed],
+                                a1[:, landed], x_new[2, landed], v_new[2, landed], t[landed])
             landing_xy[idx[landed]] = x_land[0:2].T
             landing_t[idx[landed]] = t[landed] + tau
             alive &= ~landed
@@ -303,7 +384,7 @@ def fly(
                 break
             if n_alive < 0.85 * alive.size:  # compact the working arrays
                 idx, x, v, a1, k, t, h = (idx[alive], x[:, alive], v[:, alive], a1[:, alive],
-                                          k[alive], t[alive], h[alive])
+                                          k[..., alive], t[alive], h[alive])
                 alive = np.ones(idx.size, dtype=bool)
             else:
                 h = np.where(alive, h, 0.0)  # park the landed ones until the next compaction
@@ -322,12 +403,15 @@ def reference_landing(
     gravity_m_s2: float = GRAVITY_M_S2,
     rtol: float = 1e-10,
     atol: float = 1e-12,
+    spin_rad_s=None,
 ) -> Landing:
     """The same model solved one granule at a time with scipy's DOP853 and a
-    terminal event at z = 0: slow, for tests and benchmarks."""
+    terminal event at z = 0: slow, for tests and benchmarks. With Magnus lift the
+    spin is a seventh state, integrated from the torque law (not the closed form),
+    and the lift is built literally: C_L(S) |r|^2 along omega x r / |omega x r|."""
 
-    pos, height, vel, diameter, density = _check_inputs(
-        position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2
+    pos, height, vel, diameter, density, spin = _check_inputs(
+        position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2, spin_rad_s
     )
     n = pos.shape[0]
     k_all = drag_constant(diameter, density, flight)
@@ -336,7 +420,7 @@ def reference_landing(
     out_xy = pos.copy()
     out_t = np.zeros(n)
 
-    def ground(_t, s, _k):
+    def ground(_t, s, *_args):
         return s[2]
 
     ground.terminal = True
@@ -347,12 +431,34 @@ def reference_landing(
         ks = kk * np.sqrt(rx * rx + ry * ry + rz * rz)
         return [s[3], s[4], s[5], -ks * rx, -ks * ry, -g - ks * rz]
 
+    rho_air, mu = flight.air_density_kg_m3, flight.air_viscosity_pa_s
+
+    def rhs_magnus(t, s, kk, d, rho_p):
+        ds = rhs(t, s, kk)
+        rx, ry, rz, w = s[3] - wx, s[4] - wy, s[5], s[6]
+        speed2 = rx * rx + ry * ry + rz * rz
+        cross = np.array([-w * ry, w * rx])  # omega x r, omega = (0, 0, w)
+        cross_norm = float(np.hypot(*cross))
+        if cross_norm > 0.0:
+            r_p = 0.5 * d
+            c_l = magnus.lift_coefficient(r_p * cross_norm / speed2, flight.lift_coefficient_max,
+                                          flight.lift_saturation_spin_parameter)
+            lift = 0.375 * (rho_air / rho_p) * c_l * speed2 / r_p / cross_norm
+            ds[3] += lift * cross[0]
+            ds[4] += lift * cross[1]
+        return ds + [float(magnus.spin_rate(w, d, rho_p, rho_air, mu))]
+
+    lifting = _lift_acts(flight, spin)
     for i in range(n):
         if height[i] <= 0:
             continue
         s0 = [pos[i, 0], pos[i, 1], height[i], vel[i, 0], vel[i, 1] + flight.forward_speed_m_s, vel[i, 2]]
-        sol = solve_ivp(rhs, (0.0, _MAX_FLIGHT_S), s0, method="DOP853", rtol=rtol, atol=atol,
-                        events=ground, args=(k_all[i],))
+        if lifting:
+            sol = solve_ivp(rhs_magnus, (0.0, _MAX_FLIGHT_S), s0 + [spin[i]], method="DOP853", rtol=rtol,
+                            atol=atol, events=ground, args=(k_all[i], diameter[i], density[i]))
+        else:
+            sol = solve_ivp(rhs, (0.0, _MAX_FLIGHT_S), s0, method="DOP853", rtol=rtol, atol=atol,
+                            events=ground, args=(k_all[i],))
         if sol.status != 1 or len(sol.t_events[0]) == 0:
             raise RuntimeError(f"reference solve failed for granule {i}: {sol.message}")  # pragma: no cover
         out_t[i] = sol.t_events[0][0]

@@ -91,7 +91,7 @@ def run_scene(
     height = np.maximum(disc_height + local.launch.height_m[flying], 0.0)
     landing = flight_model.fly(
         local.launch.position_m[flying], height, velocity3, granules.diameter_m[flying],
-        granules.density_kg_m3, scene.flight,
+        granules.density_kg_m3, scene.flight, spin_rad_s=local.launch.spin_rad_s[flying],
     )
     if scene.twin is not None:
         centre = np.repeat(np.asarray([d.centre_m for d in parts]), counts, axis=0)[flying]

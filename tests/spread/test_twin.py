@@ -77,8 +77,10 @@ def test_a_disc_run_on_mirrored_granules_is_the_mirrored_run(model):
     np.testing.assert_allclose(native.spin_rad_s[gone], flipped.departure.spin_rad_s[gone], rtol=0, atol=spin * largest)
 
 
-def test_mirror_image_twin_gives_a_mirror_symmetric_pattern():
-    r = run_scene(_scene(), model="analytic")
+@pytest.mark.parametrize("magnus", [False, True])
+def test_mirror_image_twin_gives_a_mirror_symmetric_pattern(magnus):
+    """With spin in flight too: the mirrored disc spins the other way, so its lift mirrors."""
+    r = run_scene(_scene({"flight.magnus": magnus}), model="analytic")
     n = r.granules.count // 2
     x = r.landing.position_m[:, 0]
     flying = r.launch.departed
