@@ -32,12 +32,17 @@ WindComponent = Annotated[Real, Field(ge=-MAX_WIND_M_S, le=MAX_WIND_M_S)]
 Angle = Annotated[Real, Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG)]
 
 
+MAX_CONE_DEG = 15.0  # a tilted flat-disc launch misses the longer time on a cone: 1/cos = 3.5 % at 15 deg
+
+
 class Spinner(StrictModel):
     radius_m: Real = Field(gt=0, le=2.0, description="disc radius")
     rpm: Real = Field(ge=MIN_RPM, le=MAX_RPM, description="disc speed, revolutions per minute")
     height_m: Real = Field(ge=0, le=5.0, description="disc height above ground")
     direction: Literal["ccw", "cw"] = Field(description="sense of rotation seen from above")
     material: str
+    cone_deg: Real = Field(default=0.0, ge=0.0, le=MAX_CONE_DEG,
+                           description="the disc surface rises outward at this angle (dished disc): launch elevation")
 
     @property
     def omega_rad_s(self) -> float:

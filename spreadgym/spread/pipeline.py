@@ -15,7 +15,7 @@ import numpy as np
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Scene
 from spreadgym.physics.contacts import Contacts, resolve_contacts
-from spreadgym.physics.departure import Departure
+from spreadgym.physics.departure import Departure, tilted_by_cone
 from spreadgym.physics.granules import GranuleBatch, sample_granules
 from spreadgym.physics.selection import SPINNER_MODELS
 from spreadgym.spread import estimate, pattern, twin
@@ -76,7 +76,8 @@ def run_scene(
             continue
         granules = sample_granules(disc.scene, fertilizer, scene.sim.replicates, first_replicate)
         contacts = resolve_contacts(disc.scene, library)
-        departure = run_spinner(disc.scene, granules, contacts, chosen, progress, tracks)
+        departure = tilted_by_cone(run_spinner(disc.scene, granules, contacts, chosen, progress, tracks),
+                                   np.radians(disc.scene.spinner.cone_deg))
         launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
         throws.append(twin.Throw(granules, departure, launch))
     # every disc flies in its own frame; the pattern is in the machine frame
