@@ -1,5 +1,5 @@
 """`spreadgym compare`: a trained policy against the published settings, random search,
-grid search and CMA-ES on the evaluation set, with every simulation counted."""
+grid search, CMA-ES and Optuna's TPE on the evaluation set, with every simulation counted."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 from spreadgym.cli import arguments
 
-METHODS = ("published", "random", "grid", "cmaes")
+METHODS = ("published", "random", "grid", "cmaes", "optuna")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

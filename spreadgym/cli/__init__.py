@@ -22,7 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("spreadgym.agents.commands.evaluate",
                  "run a trained policy (deterministic) on the evaluation set: table, JSON and pattern plots"),
     "compare": ("spreadgym.agents.commands.compare",
-                "compare a policy with random search, grid search and CMA-ES on the evaluation set"),
+                "compare a policy with random search, grid search, CMA-ES and Optuna TPE on the evaluation set"),
     "demo": ("spreadgym.agents.commands.demo",
              "the main job: better spinner settings for a wider swath (CMA-ES on the fast model, "
              "before/after with the full model), table and pictures"),

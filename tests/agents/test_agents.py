@@ -186,7 +186,7 @@ def test_compare_counts_simulations(trained, capsys, tmp_path):
     assert code == 0, err
     data = json.loads(out)
     table = {row["key"]: row for row in data["table"]}
-    assert list(table) == ["ppo", "published", "random", "grid", "cmaes"]
+    assert list(table) == ["ppo", "published", "random", "grid", "cmaes", "optuna"]
     assert table["ppo"]["search_simulations"] == 0 and table["ppo"]["simulations"] == 1
     assert table["published"]["simulations"] == 1
     assert table["random"]["search_simulations"] == budget and table["random"]["simulations"] == budget + 1
