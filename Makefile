@@ -28,6 +28,7 @@ demo: $(STAMP)
 	$(BIN)/spreadgym demo
 
 test: $(STAMP) $(RLSTAMP)
+	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
 	$(RLVENV)/bin/python -m pytest -q tests/envs/test_rl_tools.py
 

@@ -24,9 +24,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"baselines to run (default: all of {', '.join(METHODS)})")
     parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
                         help="scoring episodes per job, each on another granule sample (default 1)")
-    parser.add_argument("--granules", type=arguments.GRANULES, metavar="N", help="granules per simulation (default: env default, 2000)")
+    parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
+                        help="granules per simulation (default: the env's, 4096)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
-    parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M", help="target swaths (default 2 3 4 5)")
+    parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
+                        help="target swaths (default 2 3 4 5)")
     parser.add_argument("--seed", type=arguments.SEED, default=0, help="seed of the searches (default 0)")
     parser.add_argument("--workers", type=arguments.COUNT, default=1, metavar="N",
                         help="processes for the searches (default 1; wall times are per core either way)")
@@ -78,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
     train_kwargs = policies[0][1].env_kwargs if policies else {}
     env_kwargs = evaluation_env_kwargs(train_kwargs, args.granules)
     env = _env(env_id, env_kwargs)  # checks the kwargs here
+    env_kwargs = {**env_kwargs, "granules": env.unwrapped.config.granules}  # the count that runs, said out loud
     jobs = ev.evaluation_set(args.fertilizers, args.swaths)
     from spreadgym.agents.commands.evaluate import _check_jobs
 
@@ -131,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         print_json(payload)
         return 0
     print(f"{len(jobs)} jobs, search budget {args.budget} simulations per job, "
-          f"{env_kwargs.get('granules', 2000)} granules per simulation")
+          f"{env_kwargs['granules']} granules per simulation")
     print(ev.text_table(summaries, ev.SUMMARY_COLUMNS))
     print(f"elapsed {elapsed:.0f} s")
     for path in written:
@@ -161,7 +164,7 @@ def _load_policies(paths) -> list:
                                  f"({same[0]}); compare runs every method on one env")
     algos = [p.algo for p in out]
     result = []
-    for path, policy in zip(paths, out):
+    for policy in out:
         if algos.count(policy.algo) == 1:
             key, title = policy.algo, f"{policy.algo.upper()} policy"
         else:
@@ -180,7 +183,7 @@ def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, e
     flat = [ev.flat_row(r) | {"method": titles.get(r.method, r.method)} for m in order for r in rows[m]]
     written.append(ev.write_csv(out / "compare_rows.csv", flat, ev.ROW_COLUMNS))
     md = out / "compare.md"
-    granules = env_kwargs.get("granules", 2000)
+    granules = env_kwargs["granules"]
     md.write_text(
         f"Evaluation set: {len({(r['fertilizer'], r['target_swath_m']) for r in flat})} jobs; "
         f"search budget {args.budget} simulations per job; {granules} granules per simulation; "

@@ -15,7 +15,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
                         help="episodes per job, each on another granule sample (default 1)")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
-                        help="granules per simulation (default: the env's default, 2000, whatever training used)")
+                        help="granules per simulation (default: the env's, 4096, whatever training used)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
     parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
                         help="target swaths (default 2 3 4 5)")

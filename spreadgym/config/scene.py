@@ -83,8 +83,10 @@ class Vanes(StrictModel):
 
 class Feed(StrictModel):
     radius_m: Real = Field(ge=0, le=2.0, description="release radius from the spinner axis")
-    angle_deg: Real = Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG, description="release angle in the machine frame, from +x, ccw")
-    spread_m: Real = Field(default=0.0, ge=0, le=2.0, description="s.d. of the release point, each axis; at most the disc radius")
+    angle_deg: Real = Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG,
+                            description="release angle in the machine frame, from +x, ccw")
+    spread_m: Real = Field(default=0.0, ge=0, le=2.0,
+                           description="s.d. of the release point, each axis; at most the disc radius")
     drop_height_m: Real = Field(ge=0, le=1.0, description="release height above the disc")
     radius_range_m: Optional[tuple[Real, Real]] = Field(
         default=None, description="if set, environments, searches and charts may move the release radius within it")

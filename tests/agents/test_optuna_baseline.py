@@ -7,9 +7,9 @@ import json
 
 import numpy as np
 import pytest
+
 from spreadgym.agents import baselines as bl
 from spreadgym.agents import evaluation as ev
-
 from spreadgym.cli.main import main
 
 GRANULES = 100
