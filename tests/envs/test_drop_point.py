@@ -59,3 +59,18 @@ def test_settings_space_takes_the_scenes_ranges_and_explicit_ones_replace_them()
 def test_bad_feed_ranges_are_named(overrides, message):
     with pytest.raises(ConfigError, match=message):
         load_scene("paper", overrides)
+
+
+@pytest.mark.parametrize("env_id", ["spreadgym/SpinnerDesign-v0", "spreadgym/SpreaderTuning-v0"])
+def test_both_envs_run_twin_field_with_its_drop_point_actions(env_id):
+    kwargs = {"scene": "twin-field", "granules": 64, "context.target_swath_m": [18.0, 36.0]}
+    runs = []
+    for _ in range(2):
+        env = gym.make(env_id, **kwargs)
+        assert env.action_space.shape == (4,) and list(setting_ranges(env))[2:] == ["feed.radius_m", "feed.angle_deg"]
+        _, info = env.reset(seed=5)
+        assert 18.0 <= info["context"]["target_swath_m"] <= 36.0
+        runs.append(env.step(np.array([0.5, 0.0, 0.2, -0.4], dtype=np.float32)))
+    info = runs[0][4]
+    assert info["metrics"]["model"] == "compiled" and 0.06 <= info["settings"]["feed_radius_m"] <= 0.16
+    assert runs[0][1] == runs[1][1] and np.array_equal(runs[0][0], runs[1][0])  # same seed, same bits
