@@ -1,0 +1,41 @@
+"""An exception in a training env worker (SubprocVecEnv) reaches the user as one line."""
+
+
+from spreadgym.agents import training
+from spreadgym.cli.main import main
+from spreadgym.config.resources import config_dir
+from spreadgym.errors import SpreadgymError
+
+
+def test_a_recorded_input_error_becomes_a_one_line_spreadgym_error(tmp_path):
+    training._record_failure(str(tmp_path), SpreadgymError("scene: no file\n named x.yaml"))
+    failure = training.worker_failure(str(tmp_path))
+    assert isinstance(failure, SpreadgymError)
+    assert str(failure) == "a training env worker stopped: scene: no file named x.yaml"
+
+
+def test_a_recorded_bug_stays_a_bug_and_silence_is_said(tmp_path):
+    assert "without a message" in str(training.worker_failure(str(tmp_path)))
+    training._record_failure(str(tmp_path), ZeroDivisionError("division by zero"))
+    failure = training.worker_failure(str(tmp_path))
+    assert isinstance(failure, RuntimeError) and "ZeroDivisionError: division by zero" in str(failure)
+
+
+def test_a_worker_that_cannot_build_its_env_ends_train_with_its_message(tmp_path, monkeypatch, capsys):
+    """The parent's check passes; the scene file is gone before the two workers start."""
+    scene = tmp_path / "gone.yaml"
+    scene.write_text((config_dir() / "scenes" / "paper.yaml").read_text(encoding="utf-8"), encoding="utf-8")
+    original = training.check_env_kwargs
+
+    def check_then_remove(env_id, env_kwargs):
+        spaces = original(env_id, env_kwargs)
+        scene.unlink()
+        return spaces
+
+    monkeypatch.setattr(training, "check_env_kwargs", check_then_remove)
+    code = main(["train", "--algo", "ppo", "--timesteps", "64", "--set", "n_envs=2", "--set", "env_kwargs.granules=32",
+                 "--set", f"env_kwargs.scene={scene}", "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "a training env worker stopped:" in err and "gone.yaml" in err
+    assert "Traceback" not in err.splitlines()[-1]
