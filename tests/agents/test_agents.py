@@ -112,6 +112,7 @@ def trained(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_train_writes_model_config_checkpoints_and_logs(trained):
     assert (trained / "model.zip").is_file()
     config = yaml.safe_load((trained / "config.yaml").read_text())
@@ -125,6 +126,7 @@ def test_train_writes_model_config_checkpoints_and_logs(trained):
     assert any((trained / "tb").rglob("events.out.tfevents*"))
 
 
+@pytest.mark.slow
 def test_evaluate_round_trip_json(trained, capsys, tmp_path):
     code, out, err = run_cli(capsys, ["evaluate", "--model", str(trained / "model.zip"), "--granules", str(GRANULES),
                                       "--fertilizers", "pellet", "--swaths", "2", "4", "--json",
@@ -141,6 +143,7 @@ def test_evaluate_round_trip_json(trained, capsys, tmp_path):
     assert {"eval.csv", "eval.md", "eval.json", "patterns.png"} <= {p.name for p in tmp_path.iterdir()}
 
 
+@pytest.mark.slow
 def test_resume_continues_from_the_newest_checkpoint(trained, capsys, tmp_path):
     from spreadgym.agents.training import load_policy
 
@@ -159,6 +162,7 @@ def test_resume_continues_from_the_newest_checkpoint(trained, capsys, tmp_path):
     assert load_policy(run / "model.zip").model.num_timesteps == 96
 
 
+@pytest.mark.slow
 def test_sac_resume_keeps_the_replay_buffer(capsys, tmp_path):
     from spreadgym.agents.training import load_policy
 
@@ -178,6 +182,7 @@ def test_sac_resume_keeps_the_replay_buffer(capsys, tmp_path):
     assert load_policy(tmp_path).algo == "sac"
 
 
+@pytest.mark.slow
 def test_compare_counts_simulations(trained, capsys, tmp_path):
     budget = 6
     code, out, err = run_cli(capsys, ["compare", "--model", str(trained / "model.zip"), "--budget", str(budget),
@@ -244,6 +249,7 @@ def test_model_that_is_not_a_policy_exits_2(capsys, tmp_path, kind):
 
 # -- demo --------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_demo_end_to_end(capsys, tmp_path):
     code, out, err = run_cli(capsys, ["demo", "--budget", "20", "--granules", "1000", "--no-policy",
                                       "--out", str(tmp_path)])

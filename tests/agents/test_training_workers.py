@@ -1,5 +1,7 @@
 """An exception in a training env worker (SubprocVecEnv) reaches the user as one line."""
 
+import pytest
+
 
 from spreadgym.agents import training
 from spreadgym.cli.main import main
@@ -21,6 +23,7 @@ def test_a_recorded_bug_stays_a_bug_and_silence_is_said(tmp_path):
     assert isinstance(failure, RuntimeError) and "ZeroDivisionError: division by zero" in str(failure)
 
 
+@pytest.mark.slow
 def test_a_worker_that_cannot_build_its_env_ends_train_with_its_message(tmp_path, monkeypatch, capsys):
     """The parent's check passes; the scene file is gone before the two workers start."""
     scene = tmp_path / "gone.yaml"
