@@ -2,7 +2,6 @@
 
 import pytest
 
-
 from spreadgym.agents import training
 from spreadgym.cli.main import main
 from spreadgym.config.resources import config_dir
