@@ -18,7 +18,6 @@ saved config. Ctrl-C (or SIGTERM) stops at the next env step and saves a checkpo
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import pickle
 import re
@@ -28,7 +27,6 @@ import tempfile
 import time
 import zipfile
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import Any, Optional
 
@@ -47,6 +45,7 @@ from spreadgym.agents.run_config import (
     run_config_schema,
     validate_config,
 )
+from spreadgym.agents.training_env import WORKER_GONE, check_env_kwargs, make_training_env, worker_failure
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.errors import ConfigError, SpreadgymError
 
@@ -57,103 +56,6 @@ from spreadgym.errors import ConfigError, SpreadgymError
 CHECKPOINT_PREFIX = "rl_model"
 CHECKPOINT_RE = re.compile(rf"^{CHECKPOINT_PREFIX}_(\d+)_steps\.zip$")
 
-
-# -- envs -----------------------------------------------------------------------------------
-
-def worker_env(env_id: str, error_dir: Optional[str] = None, **env_kwargs):
-    """Make one env; in a worker process, leave Ctrl-C and SIGTERM to the trainer, and
-    write any exception's one-line message to `error_dir` before the worker dies, so
-    the trainer can say it (`worker_failure`)."""
-    if multiprocessing.parent_process() is not None:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    try:
-        env = gym.make(env_id, **env_kwargs)
-    except Exception as exc:
-        _record_failure(error_dir, exc)
-        raise
-    return env if error_dir is None else _FailureRecorder(env, error_dir)
-
-
-class _FailureRecorder(gym.Wrapper):
-    """Records the message of an exception raised by reset or step (worker processes)."""
-
-    def __init__(self, env, error_dir: str):
-        super().__init__(env)
-        self._error_dir = error_dir
-
-    def reset(self, **kwargs):
-        try:
-            return self.env.reset(**kwargs)
-        except Exception as exc:
-            _record_failure(self._error_dir, exc)
-            raise
-
-    def step(self, action):
-        try:
-            return self.env.step(action)
-        except Exception as exc:
-            _record_failure(self._error_dir, exc)
-            raise
-
-
-def _record_failure(error_dir: Optional[str], exc: BaseException) -> None:
-    """Write the exception's kind and one-line message for the trainer; in a worker
-    process of bad input, end the process quietly (the trainer says the message once,
-    without the worker's traceback)."""
-    if error_dir is None:
-        return
-    kind = "input" if isinstance(exc, (SpreadgymError, ValueError)) else type(exc).__name__
-    message = " ".join(str(exc).split()) or type(exc).__name__
-    try:
-        Path(error_dir, f"{os.getpid()}.txt").write_text(f"{kind}\t{message}", encoding="utf-8")
-    except OSError:  # the trainer has already stopped on another worker's failure
-        pass
-    if kind == "input" and multiprocessing.parent_process() is not None:
-        os._exit(2)
-
-
-def worker_failure(error_dir: str) -> BaseException:
-    """What to raise when a worker process has gone: its recorded message as a
-    SpreadgymError (exit 2) for bad input, else a RuntimeError naming the exception (a bug)."""
-    records = sorted(Path(error_dir).glob("*.txt"))
-    if not records:
-        return RuntimeError("a training env worker process died without a message (killed or out of memory?)")
-    kind, message = records[0].read_text(encoding="utf-8").split("\t", 1)
-    if kind == "input":
-        return SpreadgymError(f"a training env worker stopped: {message}")
-    return RuntimeError(f"a training env worker failed with {kind}: {message}")
-
-
-def check_env_kwargs(env_id: str, env_kwargs: dict):
-    """Build the env once in this process, so a bad kwarg fails here, naming the key."""
-    env = gym.make(env_id, **env_kwargs)
-    spaces = (env.observation_space, env.action_space)
-    env.close()
-    return spaces
-
-
-WORKER_GONE = (EOFError, BrokenPipeError, ConnectionResetError)  # what SubprocVecEnv raises when a worker died
-
-
-def make_training_env(cfg: RunConfig, error_dir: Optional[str] = None):
-    """The vector env of the run: SubprocVecEnv for n_envs > 1 (workers record their
-    failures in `error_dir`), else DummyVecEnv."""
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-
-    n = cfg.n_envs
-    vec_cls = SubprocVecEnv if n > 1 else DummyVecEnv
-    try:
-        return make_vec_env(partial(worker_env, cfg.env, error_dir if n > 1 else None), n_envs=n, seed=cfg.seed,
-                            env_kwargs=cfg.env_kwargs, vec_env_cls=vec_cls)
-    except WORKER_GONE:
-        if error_dir is None:
-            raise
-        raise worker_failure(error_dir) from None
-
-
-# -- checkpoints ----------------------------------------------------------------------------
 
 @dataclass
 class Checkpoint:

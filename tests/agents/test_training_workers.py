@@ -2,23 +2,23 @@
 
 import pytest
 
-from spreadgym.agents import training
+from spreadgym.agents import training, training_env
 from spreadgym.cli.main import main
 from spreadgym.config.resources import config_dir
 from spreadgym.errors import SpreadgymError
 
 
 def test_a_recorded_input_error_becomes_a_one_line_spreadgym_error(tmp_path):
-    training._record_failure(str(tmp_path), SpreadgymError("scene: no file\n named x.yaml"))
-    failure = training.worker_failure(str(tmp_path))
+    training_env._record_failure(str(tmp_path), SpreadgymError("scene: no file\n named x.yaml"))
+    failure = training_env.worker_failure(str(tmp_path))
     assert isinstance(failure, SpreadgymError)
     assert str(failure) == "a training env worker stopped: scene: no file named x.yaml"
 
 
 def test_a_recorded_bug_stays_a_bug_and_silence_is_said(tmp_path):
-    assert "without a message" in str(training.worker_failure(str(tmp_path)))
-    training._record_failure(str(tmp_path), ZeroDivisionError("division by zero"))
-    failure = training.worker_failure(str(tmp_path))
+    assert "without a message" in str(training_env.worker_failure(str(tmp_path)))
+    training_env._record_failure(str(tmp_path), ZeroDivisionError("division by zero"))
+    failure = training_env.worker_failure(str(tmp_path))
     assert isinstance(failure, RuntimeError) and "ZeroDivisionError: division by zero" in str(failure)
 
 
