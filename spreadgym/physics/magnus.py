@@ -126,9 +126,8 @@ def lift_factor(lift: float, c: float, rx: float, ry: float, speed2: float) -> f
     horizontal part of r), so C_L |r|^2 / r_h = C_max c / (1 + x^4)^(1/4), x = S / S_sat:
     no division by r_h, and the force fades smoothly as the flight turns vertical
     (compiled and inlined: the flight calls it per granule and stage)."""
-    x = c * math.sqrt(rx * rx + ry * ry) / max(speed2, 1e-300)  # r = 0 (at rest in the wind): no lift
-    x *= x
-    return lift * c / math.sqrt(math.sqrt(1.0 + x * x))
+    x2 = c * c * (rx * rx + ry * ry) / max(speed2 * speed2, 1e-300)  # x^2; r = 0 (at rest in the wind): no lift
+    return lift * c / math.sqrt(math.sqrt(1.0 + x2 * x2))
 
 
 @njit(cache=True, error_model="numpy")

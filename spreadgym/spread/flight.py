@@ -18,8 +18,8 @@ a few long steps; without drag the method is exact and lands in one or two steps
 landing instant is found inside the last step by a safeguarded Newton iteration on the
 Runge-Kutta step length (started from a cubic Hermite guess), so the landing point
 carries no interpolation error. `dt_s=<float>` runs the classical fixed-step RK4
-instead (kept for comparisons and benchmarks). Both run compiled, one granule at a
-time (`spreadgym.spread.flight_kernel`): each granule is an independent small problem,
+instead (kept for comparisons and benchmarks). Both run compiled, each granule on its
+own (`spreadgym.spread.flight_kernel`): each granule is an independent small problem,
 and a granule's landing does not depend on the others in the batch.
 `reference_landing` solves the same model one granule at a time with scipy's DOP853
 at tight tolerance.

@@ -1,4 +1,4 @@
-"""Compiled (numba) flight of granules, one granule at a time: the integrator behind
+"""Compiled (numba) flight of granules, each granule on its own: the integrator behind
 `spreadgym.spread.flight.fly`.
 
 Each granule is an independent small problem: its velocity ODE (drag, wind, gravity and,
@@ -7,8 +7,10 @@ optionally, Magnus lift with the closed-form spin decay) is stepped with the Dor
 landing instant is solved inside the step that crosses z = 0 (safeguarded Newton on the
 step length, started from a cubic Hermite guess). Granules never share arithmetic, so a
 granule's landing does not depend on which others fly with it, and a seed's bits do not
-depend on the batch. SI units; positions in the ground frame (origin on the spinner axis
-at launch), velocities over the ground, times since launch.
+depend on the batch. A few granules (LANES) are stepped side by side so that their
+independent arithmetic overlaps (and vectorises); each keeps its own step size. SI units;
+positions in the ground frame (origin on the spinner axis at launch), velocities over the
+ground, times since launch.
 """
 
 from __future__ import annotations
@@ -16,10 +18,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from spreadgym.physics import magnus
 from numba import njit
 
+from spreadgym.physics import magnus
 from spreadgym.physics.compiled.layout import KERNEL
 
 _INLINE = njit(cache=True, error_model="numpy", inline="always")
@@ -28,7 +29,9 @@ and a call (with its array reference counting) cost about as much as their arith
 
 MAX_FLIGHT_S = 600.0  # a granule still airborne after this is a bug, not physics
 MAX_STEPS = 1_000_000  # per granule
-_NEWTON_ITERATIONS = 50
+_NEWTON_ITERATIONS = 50  # most landing iterations per granule
+LANES = 16  # granules flown side by side
+_EMPTY, _FREE, _LANDING = 0, 1, 2  # what a lane is doing
 
 # Dormand-Prince 5(4) tableau (FSAL: the 7th stage is the next step's first).
 _A = np.array([
@@ -53,85 +56,97 @@ _E = np.array([  # 5th minus 4th order weights: the error estimate
 
 
 @_INLINE
-def _accel(vx, vy, vz, t, par, table, j, lift, wind_x, wind_y, g):
-    """a = g - K |r| r (+ the Magnus lift, `magnus.lift_factor`) for granule j at
-    velocity v and time t since launch; r = v - w. `par` rows: K (1/m), the signed lift
-    factor (1/m), r / S_sat (m); `table`: the granule's spin history (`magnus.spin_table`)."""
+def _accel(vx, vy, vz, k, lift_factor, c, lift, wind_x, wind_y, g):
+    """a = g - K |r| r (+ the Magnus lift, `magnus.lift_factor`) at velocity v; r = v - w.
+    k: K (1/m); lift_factor: sign(omega) (3/8)(rho/rho_p) C_max / r (1/m); c: r |omega| / S_sat
+    (m/s) at the time of the stage (`_spin_scale`)."""
     rx = vx - wind_x
     ry = vy - wind_y
     speed2 = rx * rx + ry * ry + vz * vz
-    minus_ks = -par[0, j] * math.sqrt(speed2)
+    minus_ks = -k * math.sqrt(speed2)
     ax = minus_ks * rx
     ay = minus_ks * ry
     az = minus_ks * vz - g
     if lift:
-        f = magnus.lift_factor(par[1, j], par[2, j] * magnus.spin_size(t, table, j), rx, ry, speed2)
+        f = magnus.lift_factor(lift_factor, c, rx, ry, speed2)
         ax -= f * ry
         ay += f * rx
     return ax, ay, az
 
 
 @_INLINE
-def _dp_step(x, v, a1, t, h, stage_v, stage_a, x_new, par, table, j, lift, wind_x, wind_y, g):
-    """One Dormand-Prince step of length h from (x, v) at time t with first stage a1:
-    the stages go to stage_v, stage_a (7, 3) (row 6: the new velocity and its
-    acceleration), the new position to x_new (3,)."""
+def _spin_scales(t, h, fraction, par, table, idx, lift, out):
+    """r |omega| / S_sat (m/s) of each lane's granule at time t + fraction * h, into out (L,)
+    (a loop of its own: the closed-form spin calls libm, the acceleration loop need not)."""
+    if lift:
+        for q in range(LANES):
+            out[q] = par[2, idx[q]] * magnus.spin_size(t[q] + fraction * h[q], table, idx[q])
+
+
+@_INLINE
+def _dp_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
+    """One Dormand-Prince step of length h[q] in every lane q from (x, v) (3, L) at time
+    t (L,) with first stage a1: the stages go to sv, sa (7, 3, L) (row 6: the new velocity
+    and its acceleration), the new position to x_new (3, L)."""
     for c in range(3):
-        stage_v[0, c] = v[c]
-        stage_a[0, c] = a1[c]
+        for q in range(LANES):
+            sv[0, c, q] = v[c, q]
+            sa[0, c, q] = a1[c, q]
     for i in range(1, 7):
         for c in range(3):
+            for q in range(LANES):
+                s = 0.0
+                for m in range(i):
+                    s += _A[i, m] * sa[m, c, q]
+                sv[i, c, q] = v[c, q] + h[q] * s
+        _spin_scales(t, h, _C[i], par, table, idx, lift, cs)
+        for q in range(LANES):
+            sa[i, 0, q], sa[i, 1, q], sa[i, 2, q] = _accel(
+                sv[i, 0, q], sv[i, 1, q], sv[i, 2, q], kk[q], lf[q], cs[q], lift, wind_x, wind_y, g)
+    for c in range(3):
+        for q in range(LANES):
             s = 0.0
-            for m in range(i):
-                s += _A[i, m] * stage_a[m, c]
-            stage_v[i, c] = v[c] + h * s
-        stage_a[i, 0], stage_a[i, 1], stage_a[i, 2] = _accel(
-            stage_v[i, 0], stage_v[i, 1], stage_v[i, 2], t + _C[i] * h, par, table, j, lift, wind_x, wind_y, g)
-    for c in range(3):
-        s = 0.0
-        for m in range(6):
-            s += _A[6, m] * stage_v[m, c]
-        x_new[c] = x[c] + h * s
+            for m in range(6):
+                s += _A[6, m] * sv[m, c, q]
+            x_new[c, q] = x[c, q] + h[q] * s
 
 
 @_INLINE
-def _rk4_step(x, v, a1, t, h, stage_v, stage_a, x_new, par, table, j, lift, wind_x, wind_y, g):
-    """Classical RK4 step, same interface as `_dp_step` (stages 1-3 used, row 6 the result)."""
+def _rk4_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
+    """Classical RK4 step in every lane, same interface as `_dp_stages` (stages 1-3 used,
+    row 6 the result)."""
     for i in range(1, 4):
-        w = h if i == 3 else 0.5 * h
+        fraction = 1.0 if i == 3 else 0.5
+        for q in range(LANES):
+            for c in range(3):
+                sv[i, c, q] = v[c, q] + (fraction * h[q]) * (a1[c, q] if i == 1 else sa[i - 1, c, q])
+        _spin_scales(t, h, fraction, par, table, idx, lift, cs)
+        for q in range(LANES):
+            sa[i, 0, q], sa[i, 1, q], sa[i, 2, q] = _accel(
+                sv[i, 0, q], sv[i, 1, q], sv[i, 2, q], kk[q], lf[q], cs[q], lift, wind_x, wind_y, g)
+    for q in range(LANES):
+        sixth = h[q] / 6.0
         for c in range(3):
-            stage_v[i, c] = v[c] + w * (a1[c] if i == 1 else stage_a[i - 1, c])
-        stage_a[i, 0], stage_a[i, 1], stage_a[i, 2] = _accel(
-            stage_v[i, 0], stage_v[i, 1], stage_v[i, 2], t + (h if i == 3 else 0.5 * h),
-            par, table, j, lift, wind_x, wind_y, g)
-    sixth = h / 6.0
-    for c in range(3):
-        x_new[c] = x[c] + sixth * (v[c] + 2.0 * (stage_v[1, c] + stage_v[2, c]) + stage_v[3, c])
-        stage_v[6, c] = v[c] + sixth * (a1[c] + 2.0 * (stage_a[1, c] + stage_a[2, c]) + stage_a[3, c])
-    stage_a[6, 0], stage_a[6, 1], stage_a[6, 2] = _accel(
-        stage_v[6, 0], stage_v[6, 1], stage_v[6, 2], t + h, par, table, j, lift, wind_x, wind_y, g)
+            x_new[c, q] = x[c, q] + sixth * (v[c, q] + 2.0 * (sv[1, c, q] + sv[2, c, q]) + sv[3, c, q])
+            sv[6, c, q] = v[c, q] + sixth * (a1[c, q] + 2.0 * (sa[1, c, q] + sa[2, c, q]) + sa[3, c, q])
+    _spin_scales(t, h, 1.0, par, table, idx, lift, cs)
+    for q in range(LANES):
+        sa[6, 0, q], sa[6, 1, q], sa[6, 2, q] = _accel(
+            sv[6, 0, q], sv[6, 1, q], sv[6, 2, q], kk[q], lf[q], cs[q], lift, wind_x, wind_y, g)
 
 
 @_INLINE
-def _step(adaptive, x, v, a1, t, h, stage_v, stage_a, x_new, par, table, j, lift, wind_x, wind_y, g):
-    if adaptive:
-        _dp_step(x, v, a1, t, h, stage_v, stage_a, x_new, par, table, j, lift, wind_x, wind_y, g)
-    else:
-        _rk4_step(x, v, a1, t, h, stage_v, stage_a, x_new, par, table, j, lift, wind_x, wind_y, g)
-
-
-@_INLINE
-def _error_ratio(x, x_new, v, h, stage_v, stage_a, atol, rtol):
-    """Largest |local error| / (atol + rtol * |state|) over positions and velocities."""
+def _error_ratio(x, x_new, v, h, sv, sa, q, atol, rtol):
+    """Largest |local error| / (atol + rtol * |state|) of lane q over positions and velocities."""
     ratio = 0.0
     for c in range(3):
         ex = 0.0
         ev = 0.0
         for m in range(7):
-            ex += _E[m] * stage_v[m, c]
-            ev += _E[m] * stage_a[m, c]
-        ratio = max(ratio, abs(h * ex) / (atol + rtol * max(abs(x[c]), abs(x_new[c]))))
-        ratio = max(ratio, abs(h * ev) / (atol + rtol * max(abs(v[c]), abs(stage_v[6, c]))))
+            ex += _E[m] * sv[m, c, q]
+            ev += _E[m] * sa[m, c, q]
+        ratio = max(ratio, abs(h * ex) / (atol + rtol * max(abs(x[c, q]), abs(x_new[c, q]))))
+        ratio = max(ratio, abs(h * ev) / (atol + rtol * max(abs(v[c, q]), abs(sv[6, c, q]))))
     return ratio
 
 
@@ -153,93 +168,143 @@ def _hermite_guess(z0, v0, z1, v1, h):
     return s
 
 
-@_INLINE
-def _land(adaptive, x, v, a1, t, h, stage_v, stage_a, x_new, par, table, j, lift, wind_x, wind_y, g):
-    """Step length tau in (0, h] with z(tau) = 0, where z(tau) is the step itself (no
-    interpolation error); the landing point is left in x_new. Entered with the step of
-    length h that ended at z <= 0 in x_new, stage_v."""
-    lo = 0.0
-    hi = h
-    tau = h * _hermite_guess(x[2], v[2], x_new[2], stage_v[6, 2], h)
-    for _ in range(_NEWTON_ITERATIONS):
-        _step(adaptive, x, v, a1, t, tau, stage_v, stage_a, x_new, par, table, j, lift, wind_x, wind_y, g)
-        z = x_new[2]
-        vz = stage_v[6, 2]
-        if z > 0:
-            lo = tau
-        else:
-            hi = tau
-        newton = tau - z / vz
-        tau_new = newton if (math.isfinite(newton) and lo <= newton <= hi) else 0.5 * (lo + hi)
-        if abs(z) <= 1e-12 or abs(tau_new - tau) <= 1e-14 * h:
-            break
-        tau = tau_new
-    return tau
-
-
 @KERNEL
 def fly_all(position, height, velocity, par, table, lift, wind_x, wind_y, g, dt, atol, rtol, out_xy, out_t):
     """Fly every granule j from (position[j], height[j]) with ground-frame velocity
     velocity[j] (m/s) to z = 0; landing points into out_xy (N, 2), times into out_t (N,).
     dt > 0: fixed-step RK4; dt = 0: adaptive Dormand-Prince 5(4) with local error
     tolerances atol, rtol. A granule at height <= 0 lands at once where it is.
-    Returns the number of granules that failed to land (within MAX_FLIGHT_S, MAX_STEPS
-    or a step above 1e-12 s)."""
+    `par`, `table`: per-granule parameters (see `_accel`).
+
+    LANES granules fly side by side, each on its own: every pass takes one step (or one
+    landing iteration) in every lane, so the lanes' independent arithmetic overlaps
+    instead of waiting on one granule's chain of stages; a lane whose granule has landed
+    takes the next one. Returns the number of granules that failed to land (within
+    MAX_FLIGHT_S, MAX_STEPS, or a step above 1e-12 s)."""
     adaptive = dt == 0.0
-    x = np.empty(3)
-    v = np.empty(3)
-    a1 = np.empty(3)
-    x_new = np.empty(3)
-    stage_v = np.empty((7, 3))
-    stage_a = np.empty((7, 3))
+    x = np.zeros((3, LANES))
+    v = np.zeros((3, LANES))
+    a1 = np.zeros((3, LANES))
+    x_new = np.zeros((3, LANES))
+    sv = np.zeros((7, 3, LANES))
+    sa = np.zeros((7, 3, LANES))
+    t = np.zeros(LANES)
+    h = np.zeros(LANES)  # the length of the lane's next step (while landing: the trial step length)
+    h_full = np.zeros(LANES)  # while landing: the step that crossed the ground
+    lo = np.zeros(LANES)
+    hi = np.zeros(LANES)
+    count = np.zeros(LANES, dtype=np.int64)  # steps taken, or landing iterations
+    mode = np.full(LANES, _EMPTY, dtype=np.int64)
+    idx = np.zeros(LANES, dtype=np.int64)
+    kk = np.zeros(LANES)  # the lane's granule's K, lift factor and spin scale (see `_accel`)
+    lf = np.zeros(LANES)
+    cs = np.zeros(LANES)
     failed = 0
-    for j in range(position.shape[0]):
+    next_j = 0
+    active = 0
+    for q in range(LANES):
+        next_j = _take(next_j, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
+                       x, v, a1, t, h, count, mode, idx, kk, lf, out_xy, out_t)
+        if mode[q] == _FREE:
+            active += 1
+    while active > 0:
+        if adaptive:
+            _dp_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift, wind_x, wind_y, g)
+        else:
+            _rk4_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift, wind_x, wind_y, g)
+        for q in range(LANES):
+            done = False
+            if mode[q] == _FREE:
+                accept = True
+                factor = 1.0
+                if adaptive:
+                    ratio = _error_ratio(x, x_new, v, h[q], sv, sa, q, atol, rtol)
+                    accept = ratio <= 1.0
+                    factor = min(max(0.9 * max(ratio, 1e-10) ** -0.2, 0.2), 5.0)
+                    if not accept:
+                        factor = min(factor, 1.0)
+                if accept and x_new[2, q] <= 0.0:  # crossed the ground: solve for the landing
+                    h_full[q] = h[q]
+                    lo[q] = 0.0
+                    hi[q] = h[q]
+                    h[q] = h[q] * _hermite_guess(x[2, q], v[2, q], x_new[2, q], sv[6, 2, q], h[q])
+                    count[q] = 0
+                    mode[q] = _LANDING
+                    continue
+                if accept:
+                    for c in range(3):
+                        x[c, q] = x_new[c, q]
+                        v[c, q] = sv[6, c, q]
+                        a1[c, q] = sa[6, c, q]
+                    t[q] += h[q]
+                h[q] *= factor
+                count[q] += 1
+                if t[q] > MAX_FLIGHT_S or h[q] < 1e-12 or count[q] >= MAX_STEPS:
+                    failed += 1
+                    done = True
+            elif mode[q] == _LANDING:
+                # safeguarded Newton on the step length tau (dz/dtau = v_z), within a bracket;
+                # the step of length tau itself gives z, so the landing point has no
+                # interpolation error
+                tau = h[q]
+                z = x_new[2, q]
+                vz = sv[6, 2, q]
+                if z > 0:
+                    lo[q] = tau
+                else:
+                    hi[q] = tau
+                newton = tau - z / vz
+                tau_new = newton if (math.isfinite(newton) and lo[q] <= newton <= hi[q]) else 0.5 * (lo[q] + hi[q])
+                count[q] += 1
+                if abs(z) <= 1e-12 or abs(tau_new - tau) <= 1e-14 * h_full[q] or count[q] >= _NEWTON_ITERATIONS:
+                    j = idx[q]
+                    out_xy[j, 0] = x_new[0, q]
+                    out_xy[j, 1] = x_new[1, q]
+                    out_t[j] = t[q] + tau
+                    done = True
+                else:
+                    h[q] = tau_new
+            if done:
+                next_j = _take(next_j, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
+                               x, v, a1, t, h, count, mode, idx, kk, lf, out_xy, out_t)
+                if mode[q] != _FREE:
+                    active -= 1
+    return failed
+
+
+@_INLINE
+def _take(next_j, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
+          x, v, a1, t, h, count, mode, idx, kk, lf, out_xy, out_t):
+    """Put the next granule that is above the ground into lane q (those at height <= 0
+    land at once where they are), or leave the lane empty (h = 0) when none is left.
+    Returns the index after the one taken."""
+    while next_j < position.shape[0]:
+        j = next_j
+        next_j += 1
         out_xy[j, 0] = position[j, 0]
         out_xy[j, 1] = position[j, 1]
         out_t[j] = 0.0
         if not height[j] > 0.0:
             continue
-        x[0], x[1], x[2] = position[j, 0], position[j, 1], height[j]
-        v[0], v[1], v[2] = velocity[j, 0], velocity[j, 1], velocity[j, 2]
-        t = 0.0
-        a1[0], a1[1], a1[2] = _accel(v[0], v[1], v[2], t, par, table, j, lift, wind_x, wind_y, g)
-        if adaptive:
+        x[0, q], x[1, q], x[2, q] = position[j, 0], position[j, 1], height[j]
+        v[0, q], v[1, q], v[2, q] = velocity[j, 0], velocity[j, 1], velocity[j, 2]
+        t[q] = 0.0
+        kk[q] = par[0, j]
+        lf[q] = par[1, j] if lift else 0.0
+        c = par[2, j] * magnus.spin_size(0.0, table, j) if lift else 0.0
+        a1[0, q], a1[1, q], a1[2, q] = _accel(v[0, q], v[1, q], v[2, q], kk[q], lf[q], c, lift, wind_x, wind_y, g)
+        if dt > 0.0:
+            h[q] = dt
+        else:
             # first step: a small part of the drag time scale 1/(K |v - w|) and of the
             # time to fall the launch height from rest; error control does the rest
-            rx, ry = v[0] - wind_x, v[1] - wind_y
-            rel = math.sqrt(rx * rx + ry * ry + v[2] * v[2])
-            h = min(0.05 / (par[0, j] * rel + 1e-9), math.sqrt(2.0 * x[2] / g))
-            h = min(max(h, 1e-5), 0.05)
-        else:
-            h = dt
-        landed = False
-        for _ in range(MAX_STEPS):
-            _step(adaptive, x, v, a1, t, h, stage_v, stage_a, x_new, par, table, j, lift, wind_x, wind_y, g)
-            accept = True
-            factor = 1.0
-            if adaptive:
-                ratio = _error_ratio(x, x_new, v, h, stage_v, stage_a, atol, rtol)
-                accept = ratio <= 1.0
-                factor = min(max(0.9 * max(ratio, 1e-10) ** -0.2, 0.2), 5.0)
-                if not accept:
-                    factor = min(factor, 1.0)
-            if accept:
-                if x_new[2] <= 0.0:
-                    tau = _land(adaptive, x, v, a1, t, h, stage_v, stage_a, x_new, par, table, j, lift,
-                                wind_x, wind_y, g)
-                    out_xy[j, 0] = x_new[0]
-                    out_xy[j, 1] = x_new[1]
-                    out_t[j] = t + tau
-                    landed = True
-                    break
-                for c in range(3):
-                    x[c] = x_new[c]
-                    v[c] = stage_v[6, c]
-                    a1[c] = stage_a[6, c]
-                t += h
-            h *= factor
-            if t > MAX_FLIGHT_S or h < 1e-12:
-                break
-        if not landed:
-            failed += 1
-    return failed
+            rx, ry = v[0, q] - wind_x, v[1, q] - wind_y
+            rel = math.sqrt(rx * rx + ry * ry + v[2, q] * v[2, q])
+            h[q] = min(max(min(0.05 / (par[0, j] * rel + 1e-9), math.sqrt(2.0 * x[2, q] / g)), 1e-5), 0.05)
+        count[q] = 0
+        mode[q] = _FREE
+        idx[q] = j
+        return next_j
+    mode[q] = _EMPTY
+    h[q] = 0.0
+    return next_j
