@@ -108,14 +108,26 @@ def spin_table(spin_rad_s, diameter_m, density_kg_m3, air_density_kg_m3: float,
     return np.stack([np.sign(omega0), w0, slope, q, t_star, omega_low, lam])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def spin_size(t: float, table: np.ndarray, j: int) -> float:
-    """|omega| (rad/s) of granule j of `spin_table` at time t after launch (compiled:
-    the flight's Magnus acceleration calls it per granule and stage)."""
+    """|omega| (rad/s) of granule j of `spin_table` at time t after launch (compiled and
+    inlined: the flight's Magnus acceleration calls it per granule and stage)."""
     if t >= table[_T_STAR, j]:  # Stokes branch
         return table[_OMEGA_LOW, j] * math.exp(-table[_LAMBDA, j] * (t - table[_T_STAR, j]))
     w = table[_W0, j] + table[_SLOPE, j] * math.expm1(table[_Q, j] * t)
     return 1.0 / (w * w)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def lift_factor(lift: float, c: float, rx: float, ry: float, speed2: float) -> float:
+    """f (1/s) with the lift acceleration f (-r_y, r_x) (m/s^2) of a granule moving at r
+    relative to the air (speed2 = |r|^2), for lift = sign(omega) (3/8)(rho/rho_p) C_max / r
+    (1/m) and c = r |omega| / S_sat (m/s). With omega vertical, S = c r_h / |r|^2 (r_h: the
+    horizontal part of r), so C_L |r|^2 / r_h = C_max c / (1 + x^4)^(1/4), x = S / S_sat:
+    no division by r_h, and the force fades smoothly as the flight turns vertical
+    (compiled and inlined: the flight calls it per granule and stage)."""
+    x2 = c * c * (rx * rx + ry * ry) / max(speed2 * speed2, 1e-300)  # x^2; r = 0 (at rest in the wind): no lift
+    return lift * c / math.sqrt(math.sqrt(1.0 + x2 * x2))
 
 
 @njit(cache=True, error_model="numpy")

@@ -140,3 +140,19 @@ def test_bad_magnus_input_is_named():
         fly(*args, Flight(magnus=True), spin_rad_s=spin[:-1])
     with pytest.raises(ConfigError, match="spin_rad_s"):
         fly(*args, Flight(magnus=True), spin_rad_s=np.full_like(spin, np.nan))
+
+
+def test_granules_on_the_ground_land_at_once_with_the_lift_on():
+    # a launch at height 0 (the pipeline clips launches below the ground to 0) lands where
+    # it is at time 0, spinning or not; the others in the batch still feel the lift
+    args, spin = launch_states(4, seed=6)
+    pos, height, vel, d, rho = args
+    height = np.where(np.arange(16) % 3 == 0, 0.0, height)
+    got = fly(pos, height, vel, d, rho, Flight(magnus=True), spin_rad_s=spin)
+    ground = height == 0.0
+    np.testing.assert_array_equal(got.time_s[ground], 0.0)
+    np.testing.assert_array_equal(got.position_m[ground], pos[ground])
+    plain = fly(pos, height, vel, d, rho, Flight(), spin_rad_s=spin)
+    assert np.all(np.hypot(*(got.position_m - plain.position_m)[~ground].T) > 0.05)
+    with pytest.raises(ConfigError, match="spinner.height_m"):
+        fly(pos, np.where(ground, -1e-3, height), vel, d, rho, Flight(magnus=True), spin_rad_s=spin)
