@@ -17,6 +17,7 @@ the end of the flat face (tip or inner end), the centre reaching the disc radius
 
 from __future__ import annotations
 
+from spreadgym.physics.compiled.event_root import illinois_step
 from spreadgym.physics.compiled.layout import (
     DISC_RADIUS,
     GRAVITY,
@@ -124,15 +125,8 @@ def step(x, xd, s, h, sticking, eps, drag_sign, frame, radius, length, P, work):
     for _ in range(2):
         mx, mxd, ms = _rk4(x, xd, s, f * h, sticking, eps, drag_sign, frame, radius, P)
         _event_values(end, mx, mxd, ms, sticking, eps, drag_sign, frame, radius, length, P)
-        g = end[which]
-        if g < 0.0:
-            hi, g_hi = f, g
-            g_lo *= 0.5
-        else:
-            lo, g_lo = f, g
-            g_hi *= 0.5
-        if g_lo == g_hi:
+        lo, hi, g_lo, g_hi, f, converged = illinois_step(lo, hi, g_lo, g_hi, f, end[which])
+        if converged:
             break
-        f = lo + (hi - lo) * g_lo / (g_lo - g_hi)
     ex, exd, es = _rk4(x, xd, s, f * h, sticking, eps, drag_sign, frame, radius, P)
     return ex, exd, es, f * h, (LEAVE_NORMAL, SLIP_CHANGE, STOPPED, END_OF_FACE, RIM)[which]

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 from spreadgym.physics.compiled.contact_law import free_acceleration
+from spreadgym.physics.compiled.event_root import illinois_step
 from spreadgym.physics.compiled.layout import DISC_RADIUS, KERNEL, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
 
 NONE = 0
@@ -124,15 +125,9 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     for _ in range(REFINE_ITERATIONS):
         sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)
         g = _event_value(kind, vane, side, sx, sy, reach, P, V)
-        if g < 0.0:
-            hi, g_hi = f, g
-            g_lo *= 0.5
-        else:
-            lo, g_lo = f, g
-            g_hi *= 0.5
-        if g_lo == g_hi:
+        lo, hi, g_lo, g_hi, f, converged = illinois_step(lo, hi, g_lo, g_hi, f, g)
+        if converged:
             break
-        f = lo + (hi - lo) * g_lo / (g_lo - g_hi)
     sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)
     if kind == FACE:  # exactly on the face line: a rebound starts from it
         g = _event_value(kind, vane, side, sx, sy, reach, P, V)
