@@ -33,7 +33,9 @@ DESIGN = "spinner_design"
 TUNING = "spreader_tuning"
 
 
-def _check_range(value: tuple[float, float], lo: float, hi: float, unit: str) -> tuple[float, float]:
+def _check_range(value: tuple[float, float], lo: float, hi: float, unit: str,
+                 positive: bool = False) -> tuple[float, float]:
+    """An ordered, finite [low, high] within [lo, hi]; with `positive`, low > 0."""
     a, b = float(value[0]), float(value[1])
     if not (math.isfinite(a) and math.isfinite(b)):
         raise ValueError(f"both ends must be finite, got [{a}, {b}]")
@@ -41,6 +43,8 @@ def _check_range(value: tuple[float, float], lo: float, hi: float, unit: str) ->
         raise ValueError(f"lower end {a} is above the upper end {b}")
     if a < lo or b > hi:
         raise ValueError(f"[{a}, {b}] must lie within [{lo}, {hi}] {unit}")
+    if positive and a <= 0:
+        raise ValueError(f"the lower end must be > 0, got {a}")
     return a, b
 
 
@@ -57,10 +61,7 @@ class ContextConfig(StrictModel):
     @field_validator("target_swath_m")
     @classmethod
     def _swath(cls, v):
-        a, b = _check_range(v, 0.0, 100.0, "m")
-        if a <= 0:
-            raise ValueError(f"the lower end must be > 0, got {a}")
-        return a, b
+        return _check_range(v, 0.0, 100.0, "m", positive=True)
 
     @field_validator("forward_speed_m_s")
     @classmethod
@@ -86,10 +87,7 @@ class SettingsConfig(StrictModel):
     @field_validator("rpm")
     @classmethod
     def _rpm(cls, v):
-        a, b = _check_range(v, 0.0, 5000.0, "rpm")
-        if a <= 0:
-            raise ValueError(f"the lower end must be > 0, got {a}")
-        return a, b
+        return _check_range(v, 0.0, 5000.0, "rpm", positive=True)
 
     @field_validator("pitch_deg")
     @classmethod
