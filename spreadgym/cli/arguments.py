@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
+import tempfile
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -44,22 +44,18 @@ def real(low: float, high: float, low_open: bool = False) -> Callable[[str], flo
 
 
 def output_folder(text: str) -> Path:
-    """A folder that exists and is writable, or can be created (its first existing
-    ancestor is a writable folder)."""
+    """A folder that can be written: created here if missing (so a command never runs
+    to its end and then fails to save), then probed with a temporary file (permission
+    bits alone say nothing to root or about read-only file systems)."""
     path = Path(text)
-    if path.exists():
-        if not path.is_dir():
-            raise argparse.ArgumentTypeError(f"{text} is a file, not a folder")
-        if not os.access(path, os.W_OK | os.X_OK):
-            raise argparse.ArgumentTypeError(f"cannot write in {text}")
-        return path
-    ancestor = path.absolute().parent
-    while not ancestor.exists():
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} lies under {ancestor}, which is a file")
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"cannot create {text}: {ancestor} is not writable")
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f"cannot write in {text}: {exc.strerror or exc}") from None
     return path
 
 
