@@ -75,9 +75,9 @@ def _set(tree: dict, parts: list[str], value: Any, schema: type[BaseModel]) -> N
             node[key] = value
             return
         child = node.get(key) if isinstance(node, dict) else node[key]
-        if child is None and isinstance(node, dict) and key not in node and (
+        if child is None and isinstance(node, dict) and (
                 _model_in(annotation) is not None or _is_free_mapping(annotation)):
-            child = node[key] = {}  # a section the config leaves out
+            child = node[key] = {}  # a section the config leaves out or sets to null (e.g. `twin`)
         if not isinstance(child, (dict, list)):
             raise ConfigError(where, "is not a section; set it as a whole")
         node = child

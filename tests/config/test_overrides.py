@@ -37,8 +37,8 @@ def test_the_schema_not_the_tree_says_what_exists():
     tree = {"number": 3.0, "flag": None}
     assert apply_overrides(tree, {"inner.a": 5.0}, Outer) == {"number": 3.0, "flag": None, "inner": {"a": 5.0}}
     assert tree == {"number": 3.0, "flag": None}  # the input is not changed
-    with pytest.raises(ConfigError, match=r"^flag: is not a section; set it as a whole$"):
-        apply_overrides(tree, {"flag.a": 1.0}, Outer)  # null is not turned into a section
+    # an optional section given as null opens on a dotted key (`--set twin.spacing_m=0.8`)
+    assert apply_overrides(tree, {"flag.a": 4.0}, Outer)["flag"] == {"a": 4.0}
     with pytest.raises(ConfigError, match=r"^number: is not a section; set it as a whole$"):
         apply_overrides(tree, {"number.x": 1.0}, Outer)
     assert apply_overrides(tree, {"free.spinner.rpm": 600.0}, Outer)["free"] == {"spinner.rpm": 600.0}
@@ -55,3 +55,10 @@ def test_list_items_follow_the_item_schema():
     assert scene.deflectors[0].length_m == 0.15 and tree["deflectors"][0]["length_m"] == 0.2
     with pytest.raises(ConfigError, match=r"^deflectors\.9: list index must be 0\.\.1$"):
         load_scene("paper-deflectors", {"deflectors.9.length_m": 0.15})
+
+
+def test_a_dotted_key_opens_an_optional_section_the_scene_sets_to_null():
+    from spreadgym.config.scene import load_scene
+
+    twin = load_scene("paper", {"twin.spacing_m": 0.8})
+    assert twin.twin is not None and twin.twin.spacing_m == 0.8 and load_scene("paper").twin is None
