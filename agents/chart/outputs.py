@@ -157,13 +157,14 @@ def chart_figure(path: Path, spec: ChartSpec, rows: list[dict], threshold: float
     return path
 
 
-def cell_figure(store: ChartStore, cell: Cell, record: dict) -> Path:
-    """The verified pattern of one cell: single pass and overlapped, and CV against width."""
+def cell_picture(spec: ChartSpec, cell: Cell, record: dict) -> bytes:
+    """The verified pattern of one cell as PNG bytes: single pass and overlapped, and CV
+    against width. Drawn where the cell ran (a Ray worker), so the driver only writes it."""
     from spreadgym.spread.pattern import Trays
     from spreadgym.viz.plots import cv_vs_bout_width, transverse_pattern
 
     row, detail = record["row"], record["detail"]
-    scene = store.spec.cell_scene(cell)
+    scene = spec.cell_scene(cell)
     trays = Trays(np.array(detail["trays"]["center_m"]), np.array(detail["trays"]["mass_kg"]),
                   scene.pattern.tray_width_m)
     curve = detail["cv_curve"]
@@ -181,8 +182,11 @@ def cell_figure(store: ChartStore, cell: Cell, record: dict) -> Path:
     names = [k for k in row if k not in HEAD and k not in TAIL]
     fig.suptitle(f"{cell.fertilizer} at {cell.width_m:g} m: {settings_text(row, names)} "
                  f"({detail['verification']['model']}, {detail['verification']['granules']} granules)", fontsize=10)
-    path = store.cell_path(cell, ".png")
-    partial = path.with_name(f".{path.stem}.partial.png")
-    fig.savefig(partial)
-    partial.replace(path)
-    return path
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    return buffer.getvalue()
+
+
+def cell_figure(store: ChartStore, cell: Cell, record: dict, picture: Optional[bytes] = None) -> Path:
+    """Write the cell's pattern picture (`picture`, or drawn here when not given)."""
+    return write_atomic(store.cell_path(cell, ".png"), picture or cell_picture(store.spec, cell, record))

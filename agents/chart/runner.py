@@ -74,20 +74,26 @@ def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
     return True
 
 
+def cell_with_picture(spec: ChartSpec, cell: Cell) -> tuple[dict, bytes]:
+    """One cell and its pattern picture (PNG bytes), both made where the cell runs."""
+    record = run_cell(spec, cell)
+    return record, outputs.cell_picture(spec, cell, record)
+
+
 def _run_ray(spec: ChartSpec, todo: Sequence[Cell], workers: Optional[int], address: Optional[str],
-             finish: Callable[[Cell, dict], None]) -> None:
+             finish: Callable[[Cell, dict, bytes], None]) -> None:
     import ray
 
     started_here = connect_ray(workers, address)
     pending: dict = {}
     try:
-        task = ray.remote(num_cpus=1)(run_cell)
+        task = ray.remote(num_cpus=1)(cell_with_picture)
         spec_ref = ray.put(spec)
         pending = {task.remote(spec_ref, cell): cell for cell in todo}
         while pending:  # short waits, so Ctrl-C is seen at once
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)
             for ref in ready:
-                finish(pending.pop(ref), ray.get(ref))
+                finish(pending.pop(ref), *ray.get(ref))
     finally:
         for ref in pending:  # interrupted or failed: stop what is still running
             ray.cancel(ref, force=True)
@@ -124,9 +130,9 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
     bar = tqdm(total=len(spec.cells), initial=len(records), desc="chart", unit="cell", file=sys.stderr,
                disable=None if progress else True, leave=False, dynamic_ncols=True)
 
-    def finish(cell: Cell, record: dict) -> None:
+    def finish(cell: Cell, record: dict, picture: bytes) -> None:
         store.save(cell, record)
-        outputs.cell_figure(store, cell, record)
+        outputs.cell_figure(store, cell, record, picture)
         records[cell.key] = record
         computed.append(cell.key)
         bar.update()
@@ -138,7 +144,7 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
             _run_ray(spec, todo, workers, address, finish)
         else:
             for cell in todo:
-                finish(cell, run_cell(spec, cell))
+                finish(cell, *cell_with_picture(spec, cell))
     finally:
         bar.close()
     ordered = [records[c.key] for c in spec.cells]

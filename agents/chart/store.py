@@ -22,12 +22,14 @@ MANIFEST = "manifest.json"
 CELLS = "cells"
 
 
-def write_atomic(path: Path, text: str) -> Path:
-    """Write `text` to `path` whole: a temporary file beside it, renamed over it."""
+def write_atomic(path: Path, content: str | bytes) -> Path:
+    """Write `content` (text as UTF-8, or bytes) to `path` whole: a temporary file beside
+    it, renamed over it."""
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(f".{path.name}.partial")
-    with open(partial, "w", encoding="utf-8") as handle:
-        handle.write(text)
+    data = content.encode("utf-8") if isinstance(content, str) else content
+    with open(partial, "wb") as handle:
+        handle.write(data)
         handle.flush()
         os.fsync(handle.fileno())
     os.replace(partial, path)

@@ -15,7 +15,7 @@ from spreadgym.cli import arguments
 from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
-            "stability", "magnus")
+            "stability", "magnus", "chart-scale", "vector-env")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,6 +34,7 @@ def write_csv(rows: list[dict], path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from spreadgym.agents.chart import scale
     from spreadgym.errors import SpreadgymError
     from spreadgym.studies import benchmarks, estimate_bench, fidelity, magnus, references, speed_accuracy, stability
 
@@ -59,8 +60,11 @@ def run(args: argparse.Namespace) -> int:
             stability.plot_stability_map(args.out.parent / "stability_map.png")),
         "magnus": lambda: magnus.magnus_rows(args.out.parent / "magnus" / "magnus_effect.png",
                                              repeats=max(args.repeats, 15), progress=say),
+        "chart-scale": lambda: scale.chart_scale_rows(repeats=args.repeats, progress=say),
+        "vector-env": lambda: vector_env_steps_per_second(repeats=args.repeats),
     }
-    plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy}
+    plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy,
+             "chart-scale": scale.plot_chart_scale}
     for name in sections:
         rows = runners[name]()
         write_csv(rows, args.out / f"{name}.csv")
@@ -130,4 +134,48 @@ def env_steps_per_second(steps: int = 20, repeats: int = 5) -> list[dict]:
                          "steps_per_s": statistics.median(rates), "steps_per_s_low": min(rates),
                          "steps_per_s_high": max(rates), "ms_per_step": 1e3 / statistics.median(rates)})
             env.close()
+    return rows
+
+
+def vector_env_steps_per_second(batch: int = 64, vector_steps: int = 2, repeats: int = 3) -> list[dict]:
+    """Env steps per second of the native SpinnerDesign vector env at `batch` sub-envs
+    (same-step autoreset) against the single env on the same number of random steps, at
+    the default config on the paper scene, in one process: the median over `repeats`
+    blocks of `vector_steps` batched steps (`vector_steps` x `batch` single steps), with
+    the blocks' range."""
+    import statistics
+    import time
+
+    import gymnasium as gym
+
+    def rates_of(step_block) -> list[float]:
+        step_block()  # warm-up (compiles or loads the fast model)
+        rates = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            step_block()
+            rates.append(vector_steps * batch / (time.perf_counter() - start))
+        return rates
+
+    venv = gym.make_vec("spreadgym/SpinnerDesign-v0", num_envs=batch, autoreset_mode="same_step")
+    venv.reset(seed=0)
+    venv.action_space.seed(0)
+    vector = rates_of(lambda: [venv.step(venv.action_space.sample()) for _ in range(vector_steps)])
+    venv.close()
+    env = gym.make("spreadgym:SpinnerDesign-v0")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+
+    def single_block():
+        for _ in range(vector_steps * batch):
+            env.step(env.action_space.sample())
+            env.reset()
+    single = rates_of(single_block)
+    env.close()
+    rows = []
+    for name, rates in (("SpinnerDesignVectorEnv", vector), ("gym.make, one env", single)):
+        rows.append({"env": name, "batch": batch if name.startswith("SpinnerDesignVector") else 1,
+                     "steps_per_s": statistics.median(rates), "steps_per_s_low": min(rates),
+                     "steps_per_s_high": max(rates),
+                     "ratio_to_single": statistics.median(rates) / statistics.median(single)})
     return rows
