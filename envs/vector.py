@@ -9,10 +9,9 @@ so with `reset(seed=s)` (sub-env i seeded s + i, as gymnasium's vector envs do) 
 observation, reward and info equals, bit for bit, that of `gym.make(id).reset(seed=s + i)`
 followed by the same actions, with a plain `reset()` after each episode.
 
-Speed: each sub-env's tray test is still one `run_scene` call. The core simulates one
-scene (one rpm, pitch and set of deflector angles) per call, so a batch of designs
-costs the sum of its scenes; docs/rl-tools.md has the measured rates against
-`SyncVectorEnv`.
+Speed: each sub-env's tray test is one `run_scene` call, so a batch of designs costs
+the sum of its scenes. About nine tenths of a run is per-granule kernel work, which
+batching designs together would not reduce; docs/rl-tools.md has the measured rates.
 
 Autoreset: `autoreset_mode="next_step"` (gymnasium's default: the step after an
 episode's end resets that sub-env and ignores its action) or `"same_step"` (the

@@ -121,6 +121,7 @@ def env_steps_per_second(steps: int = 20, repeats: int = 5) -> list[dict]:
             env.reset(seed=0)
             env.action_space.seed(0)
             env.step(env.action_space.sample())
+            env.reset()  # the warm-up step may have ended the episode
             rates = []
             for _ in range(repeats):
                 start = time.perf_counter()
