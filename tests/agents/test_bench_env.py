@@ -1,0 +1,21 @@
+"""The env benchmarks run end to end at their smallest (a tuning episode that ends during
+the warm-up once made the env section raise ResetNeeded) and report sane rates."""
+
+import math
+
+from spreadgym.agents.commands.bench import env_steps_per_second, vector_env_steps_per_second
+
+
+def test_env_section_runs_every_env_and_scene():
+    rows = env_steps_per_second(steps=2, repeats=1)
+    assert [(r["env"].split(":")[1], r["scene"]) for r in rows] == [
+        ("SpinnerDesign-v0", "paper"), ("SpinnerDesign-v0", "field"),
+        ("SpreaderTuning-v0", "paper"), ("SpreaderTuning-v0", "field")]
+    assert all(r["model"] == "compiled" and r["steps_per_s"] > 0 and math.isfinite(r["ms_per_step"]) for r in rows)
+
+
+def test_vector_env_section_compares_with_the_single_env():
+    rows = vector_env_steps_per_second(batch=2, vector_steps=1, repeats=1)
+    assert [r["batch"] for r in rows] == [2, 1]
+    assert rows[1]["ratio_to_single"] == 1.0
+    assert rows[0]["ratio_to_single"] == rows[0]["steps_per_s"] / rows[1]["steps_per_s"]
