@@ -1,4 +1,4 @@
-"""spreadgym chart on Ray: the command end to end on an embedded 2-CPU Ray, and the same
+"""spreadgym chart on Ray: a 2 x 2 chart end to end on an embedded 2-CPU Ray, and the same
 chart, row for row, in this process and on a three-node cluster (one machine)."""
 
 import json
@@ -21,21 +21,21 @@ def without_wall(rows):
 def test_cli_end_to_end_on_an_embedded_two_cpu_ray(tmp_path):
     out = tmp_path / "chart"
     argv = [sys.executable, "-m", "spreadgym.cli.main", "chart", "--scene", "paper", "--fertilizers",
-            "compound-10-16-10", "--widths", "3,4", "--budget", "1", "--granules", "64", "--workers", "2",
+            "compound-10-16-10,pellet", "--widths", "3,4", "--budget", "1", "--granules", "64", "--workers", "2",
             "--out", str(out), "--json"]
     proc = subprocess.run(argv, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     payload = json.loads(proc.stdout)
-    assert [(r["fertilizer"], r["width_m"]) for r in payload["rows"]] == [("compound-10-16-10", 3.0),
-                                                                          ("compound-10-16-10", 4.0)]
+    assert [(r["fertilizer"], r["width_m"]) for r in payload["rows"]] == [
+        ("compound-10-16-10", 3.0), ("compound-10-16-10", 4.0), ("pellet", 3.0), ("pellet", 4.0)]
     assert all(c["verification"]["model"] == "pymunk" for c in payload["cells"])
     assert all(r["cv_percent"] is not None for r in payload["rows"])
     assert {p.name for p in out.iterdir()} >= {"chart.csv", "chart.json", "chart.md", "chart.png", "manifest.json"}
     assert json.loads((out / "chart.json").read_text(encoding="utf-8")) == payload
     # The same seed gives the same cell in this process, one cell at a time, as on two Ray workers.
-    spec = make_spec("paper", "compound-10-16-10", "3,4", budget=1, granules=64)[0]
-    again = run_cell(spec, spec.cells[1])["row"]
-    assert without_wall([again]) == without_wall(payload["rows"][1:])
+    spec = make_spec("paper", "compound-10-16-10,pellet", "3,4", budget=1, granules=64)[0]
+    again = run_cell(spec, spec.cells[3])["row"]
+    assert without_wall([again]) == without_wall(payload["rows"][3:])
 
 
 @pytest.mark.slow  # three Ray nodes take about 15 s to start
