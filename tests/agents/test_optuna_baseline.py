@@ -99,20 +99,6 @@ def test_accounting_equals_the_other_searches(budget, monkeypatch):
     assert searched["optuna"] == searched["random"] == searched["cmaes"] == bl.split_budget(budget)[0]
 
 
-def test_optuna_believes_what_fresh_samples_give():
-    """As `test_a_search_believes_what_fresh_samples_give` for random search: the CV Optuna
-    reports for its choice rests on re-scores on fresh samples, so it agrees with the scoring
-    samples within their standard errors (TPE models its own evaluations and would otherwise
-    report the luckiest of them)."""
-    env = ev.make_env(ev.DESIGN_ENV, {"granules": 4096})
-    ctx = ev.evaluation_set(["compound-10-16-10"], [5.0])[0]
-    row, *fresh = bl.run_baseline(env, ctx, "optuna", budget=40, seed=1, episodes=4)
-    belief, belief_se = row.extra["search_best_cv_percent"], row.extra["search_best_cv_se_percent"]
-    assert row.extra["search_rescores"] in (2, 3)  # 10 re-scores over 4 leaders
-    scores = np.array([row.cv_percent] + [r.cv_percent for r in fresh])
-    fresh_se = np.sqrt(sum(r.cv_standard_error_percent ** 2 for r in [row, *fresh])) / scores.size
-    assert abs(belief - scores.mean()) < 3 * np.hypot(belief_se, fresh_se)
-
 
 def test_compare_runs_optuna_beside_the_other_searches(capsys, tmp_path):
     budget = 6
