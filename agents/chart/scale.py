@@ -12,24 +12,22 @@ Parallel efficiency = (cells/min on n CPUs) / (n x cells/min on 1 CPU).
 
 from __future__ import annotations
 
-import logging
 import statistics
 import tempfile
 import time
 from pathlib import Path
 from typing import Callable, Optional
 
-from spreadgym.agents.chart.runner import run_chart
+from spreadgym.agents.chart.runner import connect_ray, run_chart
 from spreadgym.agents.chart.spec import make_spec
 
 SCALE_CHART = dict(scene="paper", fertilizers="all", widths="3:6:0.5", budget=48, granules=2048, verify_runs=2)
-QUIET = {"logging_level": logging.ERROR, "log_to_driver": False, "include_dashboard": False}
 
 
 def _local(workers: int):
     import ray
 
-    ray.init(num_cpus=workers, **QUIET)
+    connect_ray(workers, None)
     return ray.shutdown
 
 
@@ -40,7 +38,7 @@ def _three_nodes():
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0, "include_dashboard": False})
     for _ in range(2):
         cluster.add_node(num_cpus=1)
-    ray.init(address=cluster.address, logging_level=logging.ERROR, log_to_driver=False)
+    connect_ray(None, cluster.address)
 
     def stop():
         ray.shutdown()
@@ -87,7 +85,8 @@ def chart_scale_rows(repeats: int = 2, progress: Optional[Callable[[str], None]]
             same[name] = same[name] and rows_now == first
             if progress:
                 progress(f"chart-scale: {name}: {rates[name][-1]:.2f} cells/min")
-    rows = [{"configuration": name, "worker_cpus": cpus, "cells": len(spec.cells),
+    rows = [{"configuration": name, "worker_cpus": cpus, "cells": len(spec.cells), "budget": spec.budget,
+             "granules": spec.granules,
              "cells_per_min": statistics.median(rates[name]), "cells_per_min_low": min(rates[name]),
              "cells_per_min_high": max(rates[name]), "ray_start_s": statistics.median(starts[name]),
              "same_rows_as_first_run": same[name]} for name, cpus, _ in configs]
@@ -116,10 +115,10 @@ def plot_chart_scale(rows: list[dict], path: Path) -> Path:
         ax.text(x, r["cells_per_min"] / 2, f"efficiency\n{r['parallel_efficiency']:.2f}", ha="center",
                 va="center", color="white")
     ax.set_ylabel("chart cells per minute")
-    ax.set_title(f"paper chart, {int(rows[0]['cells'])} cells (budget {SCALE_CHART['budget']}, "
-                 f"{SCALE_CHART['granules']} granules)")
+    ax.set_title(f"{int(rows[0]['cells'])} chart cells (budget {int(rows[0]['budget'])}, "
+                 f"{int(rows[0]['granules'])} granules)")
     ax.set_ylim(0, 1.15 * max(ideal + [r["cells_per_min_high"] for r in rows]))
-    ax.legend(loc="upper left")
+    ax.legend(loc="upper left", markerscale=0.3)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -173,10 +173,6 @@ def vector_env_steps_per_second(batch: int = 64, vector_steps: int = 2, repeats:
             env.reset()
     single = rates_of(single_block)
     env.close()
-    rows = []
-    for name, rates in (("SpinnerDesignVectorEnv", vector), ("gym.make, one env", single)):
-        rows.append({"env": name, "batch": batch if name.startswith("SpinnerDesignVector") else 1,
-                     "steps_per_s": statistics.median(rates), "steps_per_s_low": min(rates),
-                     "steps_per_s_high": max(rates),
-                     "ratio_to_single": statistics.median(rates) / statistics.median(single)})
-    return rows
+    return [{"env": name, "batch": size, "steps_per_s": statistics.median(rates), "steps_per_s_low": min(rates),
+             "steps_per_s_high": max(rates), "ratio_to_single": statistics.median(rates) / statistics.median(single)}
+            for name, size, rates in (("SpinnerDesignVectorEnv", batch, vector), ("gym.make, one env", 1, single))]
