@@ -4,19 +4,29 @@ from __future__ import annotations
 
 from spreadgym.physics.compiled.layout import KERNEL
 
+MAX_ITERATIONS = 40  # guard only: the Illinois iteration converges superlinearly (order ~1.44)
+FRACTION_TOLERANCE = 1e-10  # the event time to this fraction of the step (~1e-13 s)
+
 
 @KERNEL
-def illinois_step(lo, hi, g_lo, g_hi, f, g):
+def illinois_step(lo, hi, g_lo, g_hi, f, g, moved):
     """One update of the bracket [lo, hi] (fractions of the step) on the event value g
-    found at f (g >= 0 before the event, < 0 past it); the end kept twice has its value
-    halved. Returns (lo, hi, g_lo, g_hi, next f, converged): converged when the two end
-    values are equal, and then f is kept."""
+    found at f (g >= 0 before the event, < 0 past it). `moved`: the end the previous
+    update replaced (-1 lo, +1 hi, 0 none yet); when the same end is replaced again, the
+    other end's value is halved (Illinois), which keeps the convergence superlinear.
+    Returns (lo, hi, g_lo, g_hi, next f, converged, moved): converged when the next f
+    moves by FRACTION_TOLERANCE at most, or the two end values are equal (then f is kept)."""
     if g < 0.0:
         hi, g_hi = f, g
-        g_lo *= 0.5
+        if moved == 1:
+            g_lo *= 0.5
+        moved = 1
     else:
         lo, g_lo = f, g
-        g_hi *= 0.5
+        if moved == -1:
+            g_hi *= 0.5
+        moved = -1
     if g_lo == g_hi:
-        return lo, hi, g_lo, g_hi, f, True
-    return lo, hi, g_lo, g_hi, lo + (hi - lo) * g_lo / (g_lo - g_hi), False
+        return lo, hi, g_lo, g_hi, f, True, moved
+    f_next = lo + (hi - lo) * g_lo / (g_lo - g_hi)
+    return lo, hi, g_lo, g_hi, f_next, abs(f_next - f) <= FRACTION_TOLERANCE, moved

@@ -17,7 +17,7 @@ the end of the flat face (tip or inner end), the centre reaching the disc radius
 
 from __future__ import annotations
 
-from spreadgym.physics.compiled.event_root import illinois_step
+from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, illinois_step
 from spreadgym.physics.compiled.layout import (
     DISC_RADIUS,
     GRAVITY,
@@ -122,10 +122,11 @@ def step(x, xd, s, h, sticking, eps, drag_sign, frame, radius, length, P, work):
     if which < 0:
         return ex, exd, es, h, NONE
     lo, hi, g_lo, g_hi, f = 0.0, 1.0, max(start[which], 0.0), end[which], best
-    for _ in range(2):
+    moved = 0
+    for _ in range(MAX_ITERATIONS):
         mx, mxd, ms = _rk4(x, xd, s, f * h, sticking, eps, drag_sign, frame, radius, P)
         _event_values(end, mx, mxd, ms, sticking, eps, drag_sign, frame, radius, length, P)
-        lo, hi, g_lo, g_hi, f, converged = illinois_step(lo, hi, g_lo, g_hi, f, end[which])
+        lo, hi, g_lo, g_hi, f, converged, moved = illinois_step(lo, hi, g_lo, g_hi, f, end[which], moved)
         if converged:
             break
     ex, exd, es = _rk4(x, xd, s, f * h, sticking, eps, drag_sign, frame, radius, P)

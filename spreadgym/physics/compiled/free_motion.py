@@ -15,14 +15,13 @@ from __future__ import annotations
 import math
 
 from spreadgym.physics.compiled.contact_law import free_acceleration
-from spreadgym.physics.compiled.event_root import illinois_step
+from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, illinois_step
 from spreadgym.physics.compiled.layout import DISC_RADIUS, KERNEL, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
 
 NONE = 0
 RIM = 1
 FACE = 2
 END_CAP = 3  # a rounded end of a vane (side 0: inner end, 1: tip)
-REFINE_ITERATIONS = 3
 ON_SURFACE_M = 1e-12  # closer than this to a face line counts as on it (a rebound starts there)
 
 
@@ -122,10 +121,11 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     hi = 1.0
     g_hi = _event_value(kind, vane, side, ex, ey, reach, P, V)
     f = best
-    for _ in range(REFINE_ITERATIONS):
+    moved = 0
+    for _ in range(MAX_ITERATIONS):
         sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)
         g = _event_value(kind, vane, side, sx, sy, reach, P, V)
-        lo, hi, g_lo, g_hi, f, converged = illinois_step(lo, hi, g_lo, g_hi, f, g)
+        lo, hi, g_lo, g_hi, f, converged, moved = illinois_step(lo, hi, g_lo, g_hi, f, g, moved)
         if converged:
             break
     sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)

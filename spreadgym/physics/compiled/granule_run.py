@@ -190,7 +190,11 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
             elif event == free_motion.END_CAP:
                 ex, ey = free_motion.end_point(k, sd, V)
                 gap = math.sqrt((cx - ex) ** 2 + (cy - ey) ** 2)
-                vx, vy, s, _ = _catch(cx, cy, vx, vy, s, (cx - ex) / gap, (cy - ey) / gap, radius, P)
+                nx, ny = (cx - ex) / gap, (cy - ey) / gap
+                # exactly on the cap: a granule the frame keeps pressing on it is then
+                # not a new crossing at the next step but an overlap at its end
+                cx, cy = ex + reach * nx, ey + reach * ny
+                vx, vy, s, _ = _catch(cx, cy, vx, vy, s, nx, ny, radius, P)
             elif resting and omega * omega * math.sqrt(cx * cx + cy * cy) < P[MU_DISC] * g:
                 if math.sqrt(vx * vx + vy * vy) < P[STUCK_SPEED] + 2.0 * P[MU_DISC] * g * h:
                     outcome = RETAINED_STUCK
