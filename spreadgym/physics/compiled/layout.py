@@ -12,10 +12,12 @@ import numpy as np
 from numba import njit
 
 from spreadgym.config.scene import Scene
+from spreadgym.physics.compiled.kernel_cache import drop_stale_caches
 from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.contacts import Contacts
 from spreadgym.physics.geometry import vane_segments
 
+drop_stale_caches()  # before any cached kernel loads: see kernel_cache
 KERNEL = njit(cache=True, error_model="numpy")
 """The compile options of every kernel. error_model="numpy": a division by zero gives
 inf/nan instead of raising, so no check is compiled into each division; every division

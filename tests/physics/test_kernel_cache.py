@@ -1,0 +1,36 @@
+"""numba's kernel caches are dropped when any kernel source changes (numba issue #1833)."""
+
+from spreadgym.physics.compiled.kernel_cache import KERNEL_SOURCES, drop_stale_caches
+
+
+def test_caches_go_when_a_called_kernel_changes_and_stay_otherwise(tmp_path):
+    caller, callee = tmp_path / "caller.py", tmp_path / "callee.py"
+    caller.write_text("def run(): return step()\n")
+    callee.write_text("def step(): return 1\n")
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    built = [cache / "caller.run-1.py311.nbi", cache / "caller.run-1.py311.0.nbc"]
+
+    def build():
+        for path in built:
+            path.write_bytes(b"machine code")
+
+    bytecode = cache / "caller.cpython-311.pyc"
+    bytecode.write_bytes(b"python bytecode")
+    build()
+    assert drop_stale_caches([caller, callee])  # no stamp yet: nothing proves they are current
+    assert not any(path.exists() for path in built)
+    build()
+    assert not drop_stale_caches([caller, callee])  # same sources: kept
+    assert all(path.exists() for path in built)
+    callee.write_text("def step(): return 2\n")  # only the called file changes
+    assert drop_stale_caches([caller, callee])
+    assert not any(path.exists() for path in built)
+    assert bytecode.exists()  # Python's own caches are not numba's business
+
+
+def test_every_kernel_source_is_watched():
+    names = {path.name for path in KERNEL_SOURCES}
+    assert {"granule_run.py", "free_motion.py", "face_motion.py", "event_root.py", "magnus.py",
+            "flight_kernel.py"} <= names
+    assert all(path.is_file() for path in KERNEL_SOURCES)
