@@ -181,11 +181,10 @@ def test_the_event_root_converges_superlinearly():
         return 0.3 - f - 0.8 * f * f * f  # one root in (0, 1), curved enough to stall plain regula falsi
 
     lo, hi, g_lo, g_hi = 0.0, 1.0, g(0.0), g(1.0)
-    f, moved = g_lo / (g_lo - g_hi), 0
-    for updates in range(1, 40):
+    f, moved, converged, updates = g_lo / (g_lo - g_hi), 0, False, 0
+    while not converged and updates < 40:
         lo, hi, g_lo, g_hi, f, converged, moved = illinois_step(lo, hi, g_lo, g_hi, f, g(f), moved)
-        if converged:
-            break
-    assert updates <= 8
+        updates += 1
+    assert converged and updates <= 8
     root = 0.28204986651378205  # brentq, xtol 1e-15
     assert abs(f - root) < 10 * FRACTION_TOLERANCE
