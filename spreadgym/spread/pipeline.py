@@ -70,9 +70,11 @@ def run_scene(
     chosen, reason = twin.choose_for_discs(parts, model)
     fertilizer = library.fertilizer(scene.fertilizer)
     throws: list[twin.Throw] = []
+    mirror = False  # the second disc's throw is the first's mirrored
     for disc in parts:
         if throws and twin.is_mirror_image(parts[0].scene, disc.scene):
             throws.append(twin.mirrored(throws[0]))
+            mirror = True
             continue
         granules = sample_granules(disc.scene, fertilizer, scene.sim.replicates, first_replicate)
         contacts = resolve_contacts(disc.scene, library)
@@ -90,10 +92,16 @@ def run_scene(
     disc_height = np.repeat([d.scene.spinner.height_m for d in parts], counts)[flying]
     velocity3 = np.column_stack([local.launch.velocity_m_s[flying], local.launch.vertical_velocity_m_s[flying]])
     height = np.maximum(disc_height + local.launch.height_m[flying], 0.0)
+    # a mirrored throw in a flight without crosswind lands mirrored, to the bit (the
+    # flight's arithmetic is odd in x): fly the first disc's granules only
+    flown = int(throws[0].launch.departed.sum()) if mirror and scene.flight.wind_m_s[0] == 0.0 else flying.sum()
     landing = flight_model.fly(
-        local.launch.position_m[flying], height, velocity3, granules.diameter_m[flying],
-        granules.density_kg_m3, scene.flight, spin_rad_s=local.launch.spin_rad_s[flying],
+        local.launch.position_m[flying][:flown], height[:flown], velocity3[:flown],
+        granules.diameter_m[flying][:flown], granules.density_kg_m3, scene.flight,
+        spin_rad_s=local.launch.spin_rad_s[flying][:flown],
     )
+    if flown < flying.sum():
+        landing = twin.mirrored_landing(landing)
     if scene.twin is not None:
         centre = np.repeat(np.asarray([d.centre_m for d in parts]), counts, axis=0)[flying]
         landing = flight_model.Landing(landing.position_m + centre, landing.time_s)

@@ -22,7 +22,8 @@ disc's run mirrored (x -> -x), which halves the cost and is an unbiased sample o
 same thing: the granule inputs (uniform phase, isotropic feed spread, size) have
 mirror-symmetric distributions. Both discs then draw the same granules, mirrored; each
 replicate still pairs independent draws, so the CV's bias correction and standard error
-hold.
+hold. Without crosswind the flight is odd in x as well, so the mirrored granules' landings
+are the first disc's mirrored, to the bit (`mirrored_landing`): the pair flies once.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from spreadgym.config.scene import Deflector, Scene, mirror_disc
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import GranuleBatch
 from spreadgym.physics.selection import choose_model
+from spreadgym.spread.flight import Landing
 
 _MIRROR_TOL = 1e-9  # relative: YAML decimals such as 60.3 and 119.7 mirror to within rounding
 
@@ -143,6 +145,13 @@ def _mirror_states(d: Departure) -> Departure:
     return dataclasses.replace(d, position_m=d.position_m * flip, velocity_m_s=d.velocity_m_s * flip,
                                spin_rad_s=-d.spin_rad_s, tracks=[t * flip for t in d.tracks],
                                notes=["the first disc's run mirrored (x -> -x)"])
+
+
+def mirrored_landing(first: Landing) -> Landing:
+    """The landings of a disc pair from the first disc's (its frame): the first's, then
+    their mirror images (x -> -x), the second disc's granules in the same order."""
+    return Landing(np.vstack([first.position_m, first.position_m * [-1.0, 1.0]]),
+                   np.concatenate([first.time_s, first.time_s]))
 
 
 def moved(throw: Throw, centre_m: tuple[float, float]) -> Throw:
