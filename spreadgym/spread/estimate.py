@@ -114,8 +114,11 @@ def cv_curve(replicate_masses: np.ndarray, tray_width_m: float, driving: str,
     counts = np.array([pattern.bout_tray_count(w, tray_width_m) for w in widths_m], dtype=np.int64)
     if counts.size == 0:
         return np.zeros(0), np.zeros(0)
-    fold = np.vstack([pattern._fold_matrix(tray_count, int(n), driving) for n in counts])
-    bouts = masses @ fold.T  # (K, sum of n): every width's bout side by side
+    tray, column = pattern.fold_pairs(tray_count, counts, driving)
+    total = int(counts.sum())
+    flat = (np.arange(k)[:, None] * total + column[None, :]).ravel()
+    bouts = np.bincount(flat, weights=masses[:, tray].ravel(), minlength=k * total).reshape(k, total)
+    # (K, sum of n): every width's bout side by side
     keep = ~np.eye(k, dtype=bool)  # row j: every replicate but j (summed, not subtracted:
     leave_one_out = keep.astype(float) @ bouts  # a replicate holding all the mass leaves exact zeros)
     rows = _segment_cv(np.vstack([bouts.sum(axis=0), leave_one_out]), counts)

@@ -180,6 +180,26 @@ def _fold_matrix(tray_count: int, n: int, driving: str) -> np.ndarray:
     return ((k - i) % (2 * n) == 0).astype(float) + ((k + i - n) % (2 * n) == 0).astype(float)
 
 
+def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.ndarray, np.ndarray]:
+    """The non-zero entries of `_fold_matrix` for several bout tray counts at once, the
+    bouts side by side (bout of counts[j] starts at column sum(counts[:j])): (tray index
+    0..T-1, column). Bout tray q = k_q + n // 2 takes tray i where the matrix has a 1:
+    racetrack q = (i + n // 2) mod n; back-and-forth q = (i + n // 2) mod 2n and
+    q = (n - i + n // 2) mod 2n, each where q < n."""
+    m = tray_count // 2
+    i = np.arange(-m, m + 1)[None, :]
+    n = np.asarray(counts, dtype=np.int64)[:, None]
+    start = np.cumsum(n) - n[:, 0]
+    trays = np.broadcast_to(np.arange(tray_count), (n.shape[0], tray_count))
+    if driving == "racetrack":
+        q = (i + n // 2) % n
+        return trays.ravel(), (start[:, None] + q).ravel()
+    q = np.concatenate([(i + n // 2) % (2 * n), (n - i + n // 2) % (2 * n)], axis=1)
+    both = np.concatenate([trays, trays], axis=1)
+    hit = q < n
+    return both[hit], (start[:, None] + q)[hit]
+
+
 def bout_pattern(trays: Trays, bout_width_m: float, driving: str) -> np.ndarray:
     """The overlapped distribution over one bout (n = W / w values, kg per tray,
     left to right, tray centres (q - n // 2) * w for q = 0..n-1)."""

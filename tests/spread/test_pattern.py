@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from spreadgym.errors import ConfigError
+from spreadgym.spread import pattern
 from spreadgym.spread.pattern import (
     DRIVING,
     Trays,
@@ -257,3 +258,14 @@ def test_errors_name_their_keys():
     with pytest.raises(ConfigError) as e:
         effective_swath_m(trays, "racetrack", 0.0)
     assert e.value.key == "pattern.cv_threshold_percent"
+
+
+@pytest.mark.parametrize("driving", ["racetrack", "back-and-forth"])
+@pytest.mark.parametrize("tray_count", [1, 7, 31, 171])
+def test_fold_pairs_are_the_fold_matrices_side_by_side(driving, tray_count):
+    counts = np.arange(1, tray_count + 3)
+    tray, column = pattern.fold_pairs(tray_count, counts, driving)
+    stacked = np.zeros((counts.sum(), tray_count))
+    np.add.at(stacked, (column, tray), 1.0)
+    expected = np.vstack([pattern._fold_matrix(tray_count, int(n), driving) for n in counts])
+    assert np.array_equal(stacked, expected)
