@@ -188,3 +188,17 @@ def test_the_event_root_converges_superlinearly():
     assert converged and updates <= 8
     root = 0.28204986651378205  # brentq, xtol 1e-15
     assert abs(f - root) < 10 * FRACTION_TOLERANCE
+
+
+def test_a_granule_sliding_off_a_vane_tip_goes_round_it(prepare):
+    """A start found in twin-field's sample: it slides off the tip of a leading face while
+    the frame presses it on that face's line. Caught back onto the face at its very end,
+    it left and returned there ~100 000 times and was counted as retained."""
+    scene = load_scene("twin-field")
+    _, contacts = prepare(scene)
+    params = layout.pack_parameters(scene, contacts, 4.774648292756861e-05, 3.0, 1e-4)
+    out, track = np.zeros(granule_run.OUT_SIZE), np.full((50_000, 3), np.nan)
+    code = granule_run.run_one(0.08646045373866859, -0.029642386172222156, 0.0014093200506502803, 0.02, 0.0,
+                               params, layout.pack_vanes(scene), out, track)
+    assert code == DEPARTED
+    assert np.count_nonzero(~np.isnan(track[:, 0])) < 1000

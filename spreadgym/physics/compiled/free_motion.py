@@ -100,10 +100,12 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                 f = f_lo + (1.0 - f_lo) * g0 / (g0 - g1)
                 if f >= best:
                     continue
-                # along the vane at the crossing: within the flat face?
+                # along the vane at the crossing: within the flat face? (its very ends
+                # belong to the rounded ends: a granule that slid off the tip and is
+                # pressed on the face line there goes round the tip, not back on)
                 mx, my = cx + f * (ex - cx), cy + f * (ey - cy)
                 x = (mx - V[k, PX]) * V[k, UX] + (my - V[k, PY]) * V[k, UY]
-                if 0.0 <= x <= V[k, LENGTH]:
+                if ON_SURFACE_M < x < V[k, LENGTH] - ON_SURFACE_M:
                     best, kind, vane, side, lo, g_lo = f, FACE, k, sd, f_lo, g0
             for end in (0.0, 1.0):
                 px, py = end_point(k, end, V)
