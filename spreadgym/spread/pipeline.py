@@ -94,13 +94,14 @@ def run_scene(
     height = np.maximum(disc_height + local.launch.height_m[flying], 0.0)
     # a mirrored throw in a flight without crosswind lands mirrored, to the bit (the
     # flight's arithmetic is odd in x): fly the first disc's granules only
-    flown = int(throws[0].launch.departed.sum()) if mirror and scene.flight.wind_m_s[0] == 0.0 else flying.sum()
+    fly_once = mirror and scene.flight.wind_m_s[0] == 0.0
+    flown = int(throws[0].launch.departed.sum()) if fly_once else int(flying.sum())
     landing = flight_model.fly(
         local.launch.position_m[flying][:flown], height[:flown], velocity3[:flown],
         granules.diameter_m[flying][:flown], granules.density_kg_m3, scene.flight,
         spin_rad_s=local.launch.spin_rad_s[flying][:flown],
     )
-    if flown < flying.sum():
+    if fly_once:
         landing = twin.mirrored_landing(landing)
     if scene.twin is not None:
         centre = np.repeat(np.asarray([d.centre_m for d in parts]), counts, axis=0)[flying]
