@@ -117,8 +117,8 @@ def cv_curve(replicate_masses: np.ndarray, tray_width_m: float, driving: str,
     tray, column = pattern.fold_pairs(tray_count, counts, driving)
     total = int(counts.sum())
     flat = (np.arange(k)[:, None] * total + column[None, :]).ravel()
-    bouts = np.bincount(flat, weights=masses[:, tray].ravel(), minlength=k * total).reshape(k, total)
     # (K, sum of n): every width's bout side by side
+    bouts = np.bincount(flat, weights=masses[:, tray].ravel(), minlength=k * total).reshape(k, total)
     keep = ~np.eye(k, dtype=bool)  # row j: every replicate but j (summed, not subtracted:
     leave_one_out = keep.astype(float) @ bouts  # a replicate holding all the mass leaves exact zeros)
     rows = _segment_cv(np.vstack([bouts.sum(axis=0), leave_one_out]), counts)

@@ -164,28 +164,17 @@ def collect(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) ->
     return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=masses, width_m=w)
 
 
-def _fold_matrix(tray_count: int, n: int, driving: str) -> np.ndarray:
-    """(n, T) matrix M with bout = M @ tray_masses.
+def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.ndarray, np.ndarray]:
+    """How a row of T trays (centred on the axis) overlaps into bouts of counts[j] trays,
+    the bouts side by side (bout j starts at column sum(counts[:j])): every (tray index
+    0..T-1, column) where tray i adds its mass to the bout.
 
     Bout tray q sits at grid index k_q = q - n // 2 (centres in [-W/2, W/2)).
-    Racetrack: tray i reaches k when k = i (mod n).
+    Racetrack: tray i reaches k when k = i (mod n), so q = (i + n // 2) mod n.
     Back-and-forth: unmirrored passes (even j) put tray i at k = i + j n, i.e.
     k = i (mod 2n); mirrored passes (odd j) put it at k = j n - i, i.e.
-    k = n - i (mod 2n)."""
-    m = tray_count // 2
-    i = np.arange(-m, m + 1)[None, :]
-    k = (np.arange(n) - n // 2)[:, None]
-    if driving == "racetrack":
-        return ((k - i) % n == 0).astype(float)
-    return ((k - i) % (2 * n) == 0).astype(float) + ((k + i - n) % (2 * n) == 0).astype(float)
-
-
-def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.ndarray, np.ndarray]:
-    """The non-zero entries of `_fold_matrix` for several bout tray counts at once, the
-    bouts side by side (bout of counts[j] starts at column sum(counts[:j])): (tray index
-    0..T-1, column). Bout tray q = k_q + n // 2 takes tray i where the matrix has a 1:
-    racetrack q = (i + n // 2) mod n; back-and-forth q = (i + n // 2) mod 2n and
-    q = (n - i + n // 2) mod 2n, each where q < n."""
+    k = n - i (mod 2n); so q = (i + n // 2) mod 2n and q = (n - i + n // 2) mod 2n,
+    each where q < n."""
     m = tray_count // 2
     i = np.arange(-m, m + 1)[None, :]
     n = np.asarray(counts, dtype=np.int64)[:, None]
@@ -198,6 +187,14 @@ def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.nd
     both = np.concatenate([trays, trays], axis=1)
     hit = q < n
     return both[hit], (start[:, None] + q)[hit]
+
+
+def _fold_matrix(tray_count: int, n: int, driving: str) -> np.ndarray:
+    """(n, T) matrix M with bout = M @ tray_masses (`fold_pairs` for one bout)."""
+    tray, column = fold_pairs(tray_count, np.array([n]), driving)
+    matrix = np.zeros((n, tray_count))
+    np.add.at(matrix, (column, tray), 1.0)
+    return matrix
 
 
 def bout_pattern(trays: Trays, bout_width_m: float, driving: str) -> np.ndarray:

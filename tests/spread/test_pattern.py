@@ -262,10 +262,15 @@ def test_errors_name_their_keys():
 
 @pytest.mark.parametrize("driving", ["racetrack", "back-and-forth"])
 @pytest.mark.parametrize("tray_count", [1, 7, 31, 171])
-def test_fold_pairs_are_the_fold_matrices_side_by_side(driving, tray_count):
+def test_fold_pairs_lay_every_bout_width_side_by_side(driving, tray_count):
+    """Each tray alone, laid pass by pass (brute force): its column in every bout."""
     counts = np.arange(1, tray_count + 3)
     tray, column = pattern.fold_pairs(tray_count, counts, driving)
     stacked = np.zeros((counts.sum(), tray_count))
     np.add.at(stacked, (column, tray), 1.0)
-    expected = np.vstack([pattern._fold_matrix(tray_count, int(n), driving) for n in counts])
+    centres = _grid(tray_count // 2)
+    expected = np.vstack([
+        np.column_stack([brute_force_bout(Trays(centres, np.eye(tray_count)[i], W_TRAY), int(n), driving)
+                         for i in range(tray_count)])
+        for n in counts])
     assert np.array_equal(stacked, expected)
