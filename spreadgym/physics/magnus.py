@@ -108,26 +108,68 @@ def spin_table(spin_rad_s, diameter_m, density_kg_m3, air_density_kg_m3: float,
     return np.stack([np.sign(omega0), w0, slope, q, t_star, omega_low, lam])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def spin_size(t: float, table: np.ndarray, j: int) -> float:
-    """|omega| (rad/s) of granule j of `spin_table` at time t after launch (compiled and
-    inlined: the flight's Magnus acceleration calls it per granule and stage)."""
+_INLINE = njit(cache=True, error_model="numpy", inline="always")
+"""Compiled and inlined into the flight kernel, which calls these per granule and stage."""
+
+STEP_SERIES_LIMIT = 1e-2
+"""Largest q h for which `step_spin_base` lets a step's stages use the series of
+expm1(q f h) (five terms: relative error below (q h)^5 / 720 < 2e-13) instead of the
+closed form; q h is about 1e-3 in spreader flights (q ~ 0.02 /s, h <= 0.05 s)."""
+
+
+@_INLINE
+def inverse_spin_size(t: float, table: np.ndarray, j: int) -> float:
+    """1 / |omega| (s/rad) of granule j of `spin_table` at time t (s) after launch. On the
+    upper branch it is u^2 (u = |omega|^-1/2 is the closed form's variable), with no
+    division. Finite for a granule with no spin (whose lift factor is 0)."""
     if t >= table[_T_STAR, j]:  # Stokes branch
-        return table[_OMEGA_LOW, j] * math.exp(-table[_LAMBDA, j] * (t - table[_T_STAR, j]))
-    w = table[_W0, j] + table[_SLOPE, j] * math.expm1(table[_Q, j] * t)
-    return 1.0 / (w * w)
+        return math.exp(table[_LAMBDA, j] * (t - table[_T_STAR, j])) / table[_OMEGA_LOW, j]
+    u = table[_W0, j] + table[_SLOPE, j] * math.expm1(table[_Q, j] * t)
+    return u * u
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def lift_factor(lift: float, c: float, rx: float, ry: float, speed2: float) -> float:
+@_INLINE
+def spin_size(t: float, table: np.ndarray, j: int) -> float:
+    """|omega| (rad/s) of granule j of `spin_table` at time t (s) after launch."""
+    return 1.0 / inverse_spin_size(t, table, j)
+
+
+@_INLINE
+def step_spin_base(t: float, h: float, table: np.ndarray, j: int) -> tuple[float, float, float]:
+    """(u(t), u(t) + p/q, q h) for the stages of a step from t of length h (s): on the
+    upper branch u(t + f h) = u(t) + (u(t) + p/q) expm1(q f h), so one expm1 per step
+    serves every stage (`step_inverse_spin`). q h is returned as -1 when the step reaches
+    the Stokes branch or q h exceeds STEP_SERIES_LIMIT: use `inverse_spin_size` then."""
+    rate = table[_Q, j]
+    if not (t + h < table[_T_STAR, j] and rate * h <= STEP_SERIES_LIMIT):
+        return 0.0, 0.0, -1.0
+    e = math.expm1(rate * t)
+    return table[_W0, j] + table[_SLOPE, j] * e, table[_SLOPE, j] * (e + 1.0), rate * h
+
+
+@_INLINE
+def step_inverse_spin(u: float, growth: float, qh: float, fraction: float) -> float:
+    """1 / |omega| (s/rad) at t + fraction h from `step_spin_base`'s (u, growth, qh >= 0)."""
+    y = qh * fraction
+    u = u + growth * (y * (1.0 + y * (0.5 + y * (1.0 / 6.0 + y * (1.0 / 24.0 + y * (1.0 / 120.0))))))
+    return u * u
+
+
+@_INLINE
+def lift_factor(lift: float, size2: float, inverse_spin: float, rx: float, ry: float, speed2: float) -> float:
     """f (1/s) with the lift acceleration f (-r_y, r_x) (m/s^2) of a granule moving at r
-    relative to the air (speed2 = |r|^2), for lift = sign(omega) (3/8)(rho/rho_p) C_max / r
-    (1/m) and c = r |omega| / S_sat (m/s). With omega vertical, S = c r_h / |r|^2 (r_h: the
-    horizontal part of r), so C_L |r|^2 / r_h = C_max c / (1 + x^4)^(1/4), x = S / S_sat:
-    no division by r_h, and the force fades smoothly as the flight turns vertical
-    (compiled and inlined: the flight calls it per granule and stage)."""
-    x2 = c * c * (rx * rx + ry * ry) / max(speed2 * speed2, 1e-300)  # x^2; r = 0 (at rest in the wind): no lift
-    return lift * c / math.sqrt(math.sqrt(1.0 + x2 * x2))
+    relative to the air (speed2 = |r|^2, m^2/s^2), for lift = sign(omega) (3/8)(rho/rho_p)
+    C_max / S_sat (dimensionless), size2 = (r / S_sat)^2 (m^2) and inverse_spin = 1/|omega|
+    (s/rad). With omega vertical, x = S / S_sat = c r_h / |r|^2 with c = r |omega| / S_sat
+    and r_h the horizontal part of r, and C_L |r|^2 / r_h = C_max c / (1 + x^4)^(1/4);
+    multiplied through by 1/|omega| this is
+        f = lift |r|^2 / Y^(1/4),   Y = (|r|^2 / |omega|)^4 + (size2 r_h^2)^2,
+    with one division, no division by r_h, and a force that fades smoothly as the flight
+    turns vertical. r = 0 (at rest in the wind): f = 0."""
+    a = inverse_spin * speed2
+    a2 = a * a
+    b = size2 * (rx * rx + ry * ry)
+    return lift * speed2 / math.sqrt(math.sqrt(max(a2 * a2 + b * b, 1e-300)))
 
 
 @njit(cache=True, error_model="numpy")

@@ -105,12 +105,14 @@ def _check_inputs(position_m, height_m, velocity_m_s, diameter_m, density_kg_m3,
 
 def _magnus_parameters(k_drag, diameter, density, spin, flight: Flight) -> tuple[np.ndarray, np.ndarray]:
     """Per-granule parameters of the compiled flight with lift: (3, n) rows K (1/m), the
-    signed lift factor sign(omega) (3/8)(rho/rho_p) C_max / r (1/m) and r / S_sat (m);
-    and the (7, n) spin table of `magnus.spin_table`."""
-    radius = 0.5 * diameter
-    lift = 0.375 * flight.air_density_kg_m3 * flight.lift_coefficient_max / (density * radius) * np.sign(spin)
+    signed lift factor sign(omega) (3/8)(rho/rho_p) C_max / S_sat (dimensionless) and
+    (r / S_sat)^2 (m^2) (see `magnus.lift_factor`); and the (7, n) spin table of
+    `magnus.spin_table`."""
+    size = 0.5 * diameter / flight.lift_saturation_spin_parameter
+    lift = (0.375 * flight.air_density_kg_m3 * flight.lift_coefficient_max / flight.lift_saturation_spin_parameter
+            / density * np.sign(spin))
     table = magnus.spin_table(spin, diameter, density, flight.air_density_kg_m3, flight.air_viscosity_pa_s)
-    return np.stack([k_drag, lift, radius / flight.lift_saturation_spin_parameter]), np.ascontiguousarray(table)
+    return np.stack([k_drag, lift, size * size]), np.ascontiguousarray(table)
 
 
 def _lift_acts(flight: Flight, spin: np.ndarray) -> bool:

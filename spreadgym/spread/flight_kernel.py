@@ -56,10 +56,10 @@ _E = np.array([  # 5th minus 4th order weights: the error estimate
 
 
 @_INLINE
-def _accel(vx, vy, vz, k, lift_factor, c, lift, wind_x, wind_y, g):
+def _accel(vx, vy, vz, k, lift_factor, size2, inverse_spin, lift, wind_x, wind_y, g):
     """a = g - K |r| r (+ the Magnus lift, `magnus.lift_factor`) at velocity v; r = v - w.
-    k: K (1/m); lift_factor: sign(omega) (3/8)(rho/rho_p) C_max / r (1/m); c: r |omega| / S_sat
-    (m/s) at the time of the stage (`_spin_scale`)."""
+    k: K (1/m); lift_factor, size2: the granule's rows 1 and 2 of `par`; inverse_spin:
+    1/|omega| (s/rad) at the time of the stage (`_inverse_spins`)."""
     rx = vx - wind_x
     ry = vy - wind_y
     speed2 = rx * rx + ry * ry + vz * vz
@@ -68,26 +68,41 @@ def _accel(vx, vy, vz, k, lift_factor, c, lift, wind_x, wind_y, g):
     ay = minus_ks * ry
     az = minus_ks * vz - g
     if lift:
-        f = magnus.lift_factor(lift_factor, c, rx, ry, speed2)
+        f = magnus.lift_factor(lift_factor, size2, inverse_spin, rx, ry, speed2)
         ax -= f * ry
         ay += f * rx
     return ax, ay, az
 
 
 @_INLINE
-def _spin_scales(t, h, fraction, par, table, idx, lift, out):
-    """r |omega| / S_sat (m/s) of each lane's granule at time t + fraction * h, into out (L,)
-    (a loop of its own: the closed-form spin calls libm, the acceleration loop need not)."""
+def _spin_bases(t, h, table, idx, lift, base):
+    """Each lane's `magnus.step_spin_base` for its step (t, h), into base (3, L): one
+    closed-form spin per lane and step instead of one per stage."""
     if lift:
         for q in range(LANES):
-            out[q] = par[2, idx[q]] * magnus.spin_size(t[q] + fraction * h[q], table, idx[q])
+            base[0, q], base[1, q], base[2, q] = magnus.step_spin_base(t[q], h[q], table, idx[q])
 
 
 @_INLINE
-def _dp_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
+def _inverse_spins(t, h, fraction, base, table, idx, lift, out):
+    """1/|omega| (s/rad) of each lane's granule at time t + fraction * h, into out (L,),
+    from the step's `base`; the closed form where the series does not serve (a loop of its
+    own, rarely entered, so that the first one has no call in it)."""
+    if lift:
+        for q in range(LANES):
+            out[q] = magnus.step_inverse_spin(base[0, q], base[1, q], max(base[2, q], 0.0), fraction)
+        for q in range(LANES):
+            if base[2, q] < 0.0:
+                out[q] = magnus.inverse_spin_size(t[q] + fraction * h[q], table, idx[q])
+
+
+@_INLINE
+def _dp_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
     """One Dormand-Prince step of length h[q] in every lane q from (x, v) (3, L) at time
     t (L,) with first stage a1: the stages go to sv, sa (7, 3, L) (row 6: the new velocity
-    and its acceleration), the new position to x_new (3, L)."""
+    and its acceleration), the new position to x_new (3, L). kk, lf (2, L): the lanes'
+    drag and lift parameters; base, cs: work arrays of the spin (`_spin_bases`)."""
+    _spin_bases(t, h, table, idx, lift, base)
     for c in range(3):
         for q in range(LANES):
             sv[0, c, q] = v[c, q]
@@ -99,10 +114,10 @@ def _dp_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift,
                 for m in range(i):
                     s += _A[i, m] * sa[m, c, q]
                 sv[i, c, q] = v[c, q] + h[q] * s
-        _spin_scales(t, h, _C[i], par, table, idx, lift, cs)
+        _inverse_spins(t, h, _C[i], base, table, idx, lift, cs)
         for q in range(LANES):
             sa[i, 0, q], sa[i, 1, q], sa[i, 2, q] = _accel(
-                sv[i, 0, q], sv[i, 1, q], sv[i, 2, q], kk[q], lf[q], cs[q], lift, wind_x, wind_y, g)
+                sv[i, 0, q], sv[i, 1, q], sv[i, 2, q], kk[q], lf[0, q], lf[1, q], cs[q], lift, wind_x, wind_y, g)
     for c in range(3):
         for q in range(LANES):
             s = 0.0
@@ -112,27 +127,28 @@ def _dp_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift,
 
 
 @_INLINE
-def _rk4_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
+def _rk4_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
     """Classical RK4 step in every lane, same interface as `_dp_stages` (stages 1-3 used,
     row 6 the result)."""
+    _spin_bases(t, h, table, idx, lift, base)
     for i in range(1, 4):
         fraction = 1.0 if i == 3 else 0.5
         for q in range(LANES):
             for c in range(3):
                 sv[i, c, q] = v[c, q] + (fraction * h[q]) * (a1[c, q] if i == 1 else sa[i - 1, c, q])
-        _spin_scales(t, h, fraction, par, table, idx, lift, cs)
+        _inverse_spins(t, h, fraction, base, table, idx, lift, cs)
         for q in range(LANES):
             sa[i, 0, q], sa[i, 1, q], sa[i, 2, q] = _accel(
-                sv[i, 0, q], sv[i, 1, q], sv[i, 2, q], kk[q], lf[q], cs[q], lift, wind_x, wind_y, g)
+                sv[i, 0, q], sv[i, 1, q], sv[i, 2, q], kk[q], lf[0, q], lf[1, q], cs[q], lift, wind_x, wind_y, g)
     for q in range(LANES):
         sixth = h[q] / 6.0
         for c in range(3):
             x_new[c, q] = x[c, q] + sixth * (v[c, q] + 2.0 * (sv[1, c, q] + sv[2, c, q]) + sv[3, c, q])
             sv[6, c, q] = v[c, q] + sixth * (a1[c, q] + 2.0 * (sa[1, c, q] + sa[2, c, q]) + sa[3, c, q])
-    _spin_scales(t, h, 1.0, par, table, idx, lift, cs)
+    _inverse_spins(t, h, 1.0, base, table, idx, lift, cs)
     for q in range(LANES):
         sa[6, 0, q], sa[6, 1, q], sa[6, 2, q] = _accel(
-            sv[6, 0, q], sv[6, 1, q], sv[6, 2, q], kk[q], lf[q], cs[q], lift, wind_x, wind_y, g)
+            sv[6, 0, q], sv[6, 1, q], sv[6, 2, q], kk[q], lf[0, q], lf[1, q], cs[q], lift, wind_x, wind_y, g)
 
 
 @_INLINE
@@ -196,9 +212,10 @@ def fly_all(position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
     count = np.zeros(LANES, dtype=np.int64)  # steps taken, or landing iterations
     mode = np.full(LANES, _EMPTY, dtype=np.int64)
     idx = np.zeros(LANES, dtype=np.int64)
-    kk = np.zeros(LANES)  # the lane's granule's K, lift factor and spin scale (see `_accel`)
-    lf = np.zeros(LANES)
+    kk = np.zeros(LANES)  # the lane's granule's K, its lift parameters and 1/|omega| (see `_accel`)
+    lf = np.zeros((2, LANES))
     cs = np.zeros(LANES)
+    base = np.zeros((3, LANES))  # the lane's spin at its step (`_spin_bases`)
     failed = 0
     next_j = 0
     active = 0
@@ -209,9 +226,9 @@ def fly_all(position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
             active += 1
     while active > 0:
         if adaptive:
-            _dp_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift, wind_x, wind_y, g)
+            _dp_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lift, wind_x, wind_y, g)
         else:
-            _rk4_stages(x, v, a1, t, h, sv, sa, x_new, par, table, idx, kk, lf, cs, lift, wind_x, wind_y, g)
+            _rk4_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lift, wind_x, wind_y, g)
         for q in range(LANES):
             done = False
             if mode[q] == _FREE:
@@ -290,9 +307,11 @@ def _take(next_j, q, position, height, velocity, par, table, lift, wind_x, wind_
         v[0, q], v[1, q], v[2, q] = velocity[j, 0], velocity[j, 1], velocity[j, 2]
         t[q] = 0.0
         kk[q] = par[0, j]
-        lf[q] = par[1, j] if lift else 0.0
-        c = par[2, j] * magnus.spin_size(0.0, table, j) if lift else 0.0
-        a1[0, q], a1[1, q], a1[2, q] = _accel(v[0, q], v[1, q], v[2, q], kk[q], lf[q], c, lift, wind_x, wind_y, g)
+        lf[0, q] = par[1, j] if lift else 0.0
+        lf[1, q] = par[2, j] if lift else 0.0
+        w = magnus.inverse_spin_size(0.0, table, j) if lift else 0.0
+        a1[0, q], a1[1, q], a1[2, q] = _accel(v[0, q], v[1, q], v[2, q], kk[q], lf[0, q], lf[1, q], w, lift,
+                                              wind_x, wind_y, g)
         if dt > 0.0:
             h[q] = dt
         else:

@@ -107,6 +107,48 @@ def test_spin_closed_form_solves_the_torque_law(spin0):
     assert abs(got[-1]) < abs(spin0) and np.sign(got[-1]) == np.sign(spin0)
 
 
+@pytest.mark.parametrize("spin0", [15000.0, -3000.0, 60.0])
+def test_one_closed_form_spin_per_step_serves_every_stage(spin0):
+    # the flight's stages take 1/|omega| from a series around the step's start: it must
+    # equal the closed form at every stage fraction, and hand back to it where the step
+    # reaches the Stokes branch (60 rad/s is on it from the start) or q h is too large
+    d, rho_p = np.array([2e-3]), np.array([877.0])
+    table = magnus.spin_table(np.array([spin0]), d, rho_p, 1.2, MU)
+    fractions = [0.0, 0.2, 0.3, 0.8, 8 / 9, 1.0]
+    served = 0
+    for t, h in [(0.0, 0.05), (0.7, 0.01), (30.0, 0.05), (0.0, 2.0)]:
+        u, growth, qh = magnus.step_spin_base(t, h, table, 0)
+        for f in fractions:
+            exact = magnus.inverse_spin_size(t + f * h, table, 0)
+            assert exact == pytest.approx(1.0 / abs(magnus.spin_at(np.array([t + f * h]), table)[0]), rel=1e-14)
+            if qh >= 0.0:
+                assert magnus.step_inverse_spin(u, growth, qh, f) == pytest.approx(exact, rel=1e-13)
+        served += qh >= 0.0
+        if qh >= 0.0:
+            assert t + h < table[4, 0] and qh <= magnus.STEP_SERIES_LIMIT
+    assert served == (0 if spin0 == 60.0 else 2)  # (0, 2 s) is too long a step for the series
+
+
+def test_lift_factor_is_the_lift_law_written_out():
+    # f (-r_y, r_x) must be (3/8)(rho/rho_p) C_L(S) |r|^2 / r along the horizontal normal,
+    # S = r |omega| r_h / |r|^2: check the division-free form against the law term by term
+    rng = np.random.default_rng(3)
+    rho, rho_p, c_max, s_sat = 1.2, 1300.0, 0.37, 0.34
+    for _ in range(200):
+        r = rng.uniform(0.5e-3, 2.5e-3)
+        omega = rng.choice([-1.0, 1.0]) * rng.uniform(10.0, 2e4)
+        rel = rng.normal(size=3) * rng.uniform(0.1, 30.0)
+        speed2 = float(rel @ rel)
+        r_h = math.hypot(rel[0], rel[1])
+        s = r * abs(omega) * r_h / speed2
+        want = 0.375 * rho / rho_p * magnus.lift_coefficient(s, c_max, s_sat) * speed2 / r
+        lift = math.copysign(0.375 * rho / rho_p * c_max / s_sat, omega)
+        f = magnus.lift_factor(lift, (r / s_sat) ** 2, 1.0 / abs(omega), rel[0], rel[1], speed2)
+        assert abs(f) * r_h == pytest.approx(want, rel=1e-12)
+        assert math.copysign(1.0, f) == math.copysign(1.0, omega)
+    assert magnus.lift_factor(1.0, 1e-6, 1e-3, 0.0, 0.0, 0.0) == 0.0  # at rest in the wind: no lift, no NaN
+
+
 def test_spin_loses_a_quarter_to_a_third_in_the_first_second_at_spreader_spins():
     # as docs/magnus.md states: a 3 mm compound granule at 5000-12000 rad/s
     table = magnus.spin_table(np.array([5000.0, 12000.0]), np.array([3e-3, 3e-3]), 1734.0, 1.2, MU)
