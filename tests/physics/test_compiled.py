@@ -190,6 +190,31 @@ def test_the_event_root_converges_superlinearly():
     assert abs(f - root) < 10 * FRACTION_TOLERANCE
 
 
+def test_the_free_phase_event_root_is_newton_with_a_bisection_guard():
+    """Safeguarded Newton from the regula falsi guess: to 1e-10 of the step in at most 4
+    updates on a smooth event; where the slope would throw it out of the bracket (a grazing
+    approach) the bracket halves instead, and it still converges."""
+    from spreadgym.physics.compiled.event_root import FRACTION_TOLERANCE, newton_step
+
+    root = 0.28204986651378205  # of 0.3 - f - 0.8 f^3 (brentq, xtol 1e-15)
+
+    def solve(g, slope, guess):
+        lo, hi, f, converged, updates = 0.0, 1.0, guess, False, 0
+        while not converged and updates < 60:
+            lo, hi, f_next, converged = newton_step(lo, hi, f, g(f), slope(f))
+            assert lo - 1e-15 <= root <= hi + 1e-15  # the root to brentq's xtol
+            updates += 1
+            if not converged:
+                f = f_next
+        return f, updates
+
+    f, updates = solve(lambda f: 0.3 - f - 0.8 * f**3, lambda f: -1.0 - 2.4 * f * f, 0.3 / 1.1)
+    assert updates <= 4 and abs(f - root) < 10 * FRACTION_TOLERANCE
+    # a wrong, tiny slope sends every Newton point outside: the guard alone must converge
+    f, updates = solve(lambda f: 0.3 - f - 0.8 * f**3, lambda f: -1e-30, 0.9)
+    assert 20 <= updates <= 40 and abs(f - root) < 10 * FRACTION_TOLERANCE
+
+
 def test_a_granule_sliding_off_a_vane_tip_goes_round_it(prepare):
     """A start found in twin-field's sample: it slides off the tip of a leading face while
     the frame presses it on that face's line. Caught back onto the face at its very end,

@@ -2,7 +2,7 @@
 
 Fourth-order Runge-Kutta steps of the free acceleration (contact_law). A step ends
 early at the first event inside it, located on the continuous path (a crossing of a
-face line or of the rim is found by regula falsi on re-integrated sub-steps, so a
+face line or of the rim is found by safeguarded Newton on re-integrated sub-steps, so a
 fast granule cannot jump through a vane): the centre reaches the disc radius, or the
 granule, below the vane tops, reaches a vane face from outside (also the return
 after a rebound off that face, however short the flight) or one of its rounded
@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 
 from spreadgym.physics.compiled.contact_law import free_acceleration
-from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, illinois_step
+from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, newton_step
 from spreadgym.physics.compiled.layout import DISC_RADIUS, KERNEL, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
 
 NONE = 0
@@ -56,6 +56,18 @@ def _event_value(kind, vane, side, cx, cy, reach, P, V):
 
 
 @KERNEL
+def _event_rate(kind, vane, side, cx, cy, vx, vy, V):
+    """d/dt of `_event_value` at position c, velocity v (disc frame, where the vanes stand still)."""
+    if kind == RIM:
+        return -2.0 * (cx * vx + cy * vy)
+    if kind == END_CAP:
+        ex, ey = end_point(vane, side, V)
+        dx, dy = cx - ex, cy - ey
+        return (dx * vx + dy * vy) / math.sqrt(dx * dx + dy * dy)
+    return side * (vx * V[vane, NX] + vy * V[vane, NY])
+
+
+@KERNEL
 def end_point(vane, end, V):
     """Inner end (end 0) or tip (end 1) of a vane's centre line."""
     length = end * V[vane, LENGTH]
@@ -74,7 +86,7 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     g1 = _event_value(RIM, 0, 0.0, ex, ey, reach, P, V)
     if g1 < 0.0:
         best, kind = max(g0, 0.0) / (max(g0, 0.0) - g1), RIM
-    lo, g_lo = 0.0, max(g0, 0.0)
+    lo = 0.0  # the bracket's lower end (fractions of the step): after the start of a rebound
     near = (1.001 * reach) ** 2  # squared distance beyond which an end cap is surely not reached
     if below:
         for k in range(V.shape[0]):
@@ -106,7 +118,7 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                 mx, my = cx + f * (ex - cx), cy + f * (ey - cy)
                 x = (mx - V[k, PX]) * V[k, UX] + (my - V[k, PY]) * V[k, UY]
                 if ON_SURFACE_M < x < V[k, LENGTH] - ON_SURFACE_M:
-                    best, kind, vane, side, lo, g_lo = f, FACE, k, sd, f_lo, g0
+                    best, kind, vane, side, lo = f, FACE, k, sd, f_lo
             for end in (0.0, 1.0):
                 px, py = end_point(k, end, V)
                 if (ex - px) ** 2 + (ey - py) ** 2 >= near:
@@ -116,21 +128,21 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                 if g0 > ON_SURFACE_M and g1 < 0.0:
                     f = g0 / (g0 - g1)
                     if f < best:
-                        best, kind, vane, side, lo, g_lo = f, END_CAP, k, end, 0.0, g0
+                        best, kind, vane, side, lo = f, END_CAP, k, end, 0.0
     if kind == NONE:
         return ex, ey, evx, evy, h, NONE, -1, 0.0
-    # regula falsi (Illinois) on the re-integrated path
-    hi = 1.0
-    g_hi = _event_value(kind, vane, side, ex, ey, reach, P, V)
-    f = best
-    moved = 0
+    # safeguarded Newton on the re-integrated path, from the regula falsi guess; the
+    # state is the one at the last point evaluated (within FRACTION_TOLERANCE of the root)
+    f, hi = best, 1.0
+    sx, sy, svx, svy = cx, cy, vx, vy
     for _ in range(MAX_ITERATIONS):
         sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)
         g = _event_value(kind, vane, side, sx, sy, reach, P, V)
-        lo, hi, g_lo, g_hi, f, converged, moved = illinois_step(lo, hi, g_lo, g_hi, f, g, moved)
+        slope = h * _event_rate(kind, vane, side, sx, sy, svx, svy, V)
+        lo, hi, f_next, converged = newton_step(lo, hi, f, g, slope)
         if converged:
             break
-    sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)
+        f = f_next
     if kind == FACE:  # exactly on the face line: a rebound starts from it
         g = _event_value(kind, vane, side, sx, sy, reach, P, V)
         sx, sy = sx - g * side * V[vane, NX], sy - g * side * V[vane, NY]
