@@ -107,8 +107,9 @@ def target_rows(estimate_bench, out: Path, say) -> list[dict]:
 
 def env_steps_per_second(steps: int = 20, repeats: int = 5) -> list[dict]:
     """Env steps per second at the default config of each environment (one process), on
-    the paper and the field scene: the median of `repeats` blocks of `steps` random
-    steps after one warm-up step (which compiles the fast model), with the blocks' range."""
+    the paper, field and twin-field scenes: the median of `repeats` blocks of `steps`
+    random steps after one warm-up step (which compiles the fast model), with the blocks'
+    range."""
     import statistics
     import time
 
@@ -116,7 +117,7 @@ def env_steps_per_second(steps: int = 20, repeats: int = 5) -> list[dict]:
 
     rows = []
     for env_id in ("spreadgym:SpinnerDesign-v0", "spreadgym:SpreaderTuning-v0"):
-        for scene in ("paper", "field"):
+        for scene in ("paper", "field", "twin-field"):
             env = gym.make(env_id, scene=scene)
             env.reset(seed=0)
             env.action_space.seed(0)
