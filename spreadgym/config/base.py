@@ -65,10 +65,19 @@ def _model_inside(annotation: Any) -> Any:
     return None
 
 
+_UNION_TAG = re.compile(r"^(float|int|list\[.*\])$")  # how pydantic names the branch of a union in a location
+
+
 def format_validation_error(exc: ValidationError, model: type[BaseModel], root: str) -> ConfigError:
-    """The first problem of `exc` as one line: dotted key, what is wrong, what is allowed."""
-    first = exc.errors()[0]
-    loc = tuple(first["loc"])
+    """The first problem of `exc` as one line: dotted key, what is wrong, what is allowed.
+    Of a field that takes one value or a list (a union), a list's problem is reported
+    from the list branch (`vanes.pitch_deg.1: ... finite`), without pydantic's branch tags."""
+    errors = exc.errors()
+    first = errors[0]
+    if isinstance(first.get("input"), list):
+        listed = [e for e in errors if any(isinstance(p, str) and p.startswith("list[") for p in e["loc"])]
+        first = listed[0] if listed else first
+    loc = tuple(p for p in first["loc"] if not (isinstance(p, str) and _UNION_TAG.match(p)))
     key = ".".join(str(p) for p in loc) or root
     message = first["msg"].removeprefix("Value error, ")
     named = re.match(r"^([\w.\[\]]+): (.*)$", message, flags=re.S)

@@ -53,7 +53,9 @@ class Spinner(StrictModel):
 
 class Vanes(StrictModel):
     count: Integer = Field(ge=1, le=16)
-    inner_radius_m: Real = Field(ge=0, le=2.0)
+    inner_radius_m: Union[Real, list[Real]] = Field(
+        description="radius of the vanes' inner ends; one value, or one per vane (short and long vanes), each 0..2 m"
+    )
     outer_radius_m: Optional[Real] = Field(default=None, gt=0, description="default: disc radius")
     thickness_m: Real = Field(gt=0, le=0.05)
     pitch_deg: Union[Real, list[Real]] = Field(
@@ -73,6 +75,22 @@ class Vanes(StrictModel):
             if not math.isfinite(p) or abs(p) > MAX_PITCH_DEG:
                 raise ValueError(f"pitch_deg: {p} outside [-{MAX_PITCH_DEG}, {MAX_PITCH_DEG}] deg")
         return self
+
+    @model_validator(mode="after")
+    def _inner_radii_in_range(self) -> "Vanes":
+        radii = self.inner_radius_m if isinstance(self.inner_radius_m, list) else [self.inner_radius_m]
+        if isinstance(self.inner_radius_m, list) and len(radii) != self.count:
+            raise ValueError(f"inner_radius_m: one value or one per vane ({self.count}), got {len(radii)}")
+        for r in radii:
+            if not (math.isfinite(r) and 0.0 <= r <= 2.0):
+                raise ValueError(f"inner_radius_m: {r} outside [0, 2] m")
+        return self
+
+    def inner_radii_m(self) -> list[float]:
+        """Radius (m) of each vane's inner end (length `count`)."""
+        if isinstance(self.inner_radius_m, list):
+            return list(self.inner_radius_m)
+        return [self.inner_radius_m] * self.count
 
     def pitches_rad(self) -> list[float]:
         """Pitch of each vane in radians (length `count`)."""
@@ -206,7 +224,7 @@ class TwinVanes(StrictModel):
     """`vanes` keys of the second disc (null: the first disc's, pitches in mirrored order)."""
 
     count: Optional[Integer] = Field(default=None, ge=1, le=16)
-    inner_radius_m: Optional[Real] = Field(default=None, ge=0, le=2.0)
+    inner_radius_m: Optional[Union[Real, list[Real]]] = None
     outer_radius_m: Optional[Real] = Field(default=None, gt=0)
     thickness_m: Optional[Real] = Field(default=None, gt=0, le=0.05)
     pitch_deg: Optional[Union[Real, list[Real]]] = None
@@ -305,15 +323,18 @@ def mirror_disc(spinner: Spinner, vanes: Vanes, feed: Feed) -> tuple[Spinner, Va
 
     Vane k stands at angle 2 pi k / N with its pitch leaning in the direction of
     rotation, so the mirror keeps every pitch and reverses the order of the vanes after
-    the first (vane k of the mirror is vane N - k of the original)."""
-    pitch = vanes.pitch_deg
-    if isinstance(pitch, list):
-        pitch = [pitch[0], *pitch[:0:-1]]
+    the first (vane k of the mirror is vane N - k of the original); so does a list of
+    inner radii."""
+
+    def reordered(values):
+        return [values[0], *values[:0:-1]] if isinstance(values, list) else values
+
+    pitch, inner = reordered(vanes.pitch_deg), reordered(vanes.inner_radius_m)
     mirrored_angle = 180.0 - feed.angle_deg
     if mirrored_angle > MAX_ANGLE_DEG:
         mirrored_angle -= 360.0
     return (spinner.model_copy(update={"direction": "cw" if spinner.direction == "ccw" else "ccw"}),
-            vanes.model_copy(update={"pitch_deg": pitch}),
+            vanes.model_copy(update={"pitch_deg": pitch, "inner_radius_m": inner}),
             feed.model_copy(update={"angle_deg": mirrored_angle}))
 
 
@@ -337,9 +358,9 @@ def _check_disc(spinner: Spinner, vanes: Vanes, feed: Feed, prefix: str) -> None
     outer = _vane_outer_radius_m(spinner, vanes)
     if outer > radius + 1e-12:
         raise ValueError(f"{prefix}vanes.outer_radius_m: {outer} m is longer than the disc radius {radius} m")
-    if vanes.inner_radius_m >= outer:
+    if max(vanes.inner_radii_m()) >= outer:
         raise ValueError(
-            f"{prefix}vanes.inner_radius_m: {vanes.inner_radius_m} m must be below the outer radius {outer} m"
+            f"{prefix}vanes.inner_radius_m: {max(vanes.inner_radii_m())} m must be below the outer radius {outer} m"
         )
     tip_speed = spinner.rpm * RPM_TO_RAD_S * radius
     if tip_speed > MAX_TIP_SPEED_M_S:

@@ -140,7 +140,7 @@ def _run_case(case: Case, granules: int, rotation: str, model: str, seed: int, l
         rpm=case.rpm, disc_radius_m=scene.spinner.radius_m, rotation=rotation,
         vane_friction=contacts.vane_friction, disc_friction=contacts.disc_friction,
         granule_radius_m=0.5 * fertilizer.size.d50_m, release_radius_m=scene.feed.radius_m,
-        inner_radius_m=scene.vanes.inner_radius_m, half_thickness_m=0.5 * scene.vanes.thickness_m,
+        inner_radius_m=scene.vanes.inner_radii_m()[0], half_thickness_m=0.5 * scene.vanes.thickness_m,
     )
     return {
         "material": case.material,
@@ -412,7 +412,7 @@ def _plot_sweep(rows, sweep, path) -> Path:
         radius = 0.5 * (grid if sweep == "diameter" else any_row["diameter_m"])
         ref = closed_form_departure(rpm, radius, rotation, picked[0]["vane_friction"], picked[0]["disc_friction"],
                                     granule_radius_m=0.5 * fertilizer.size.d50_m,
-                                    release_radius_m=base.feed.radius_m, inner_radius_m=base.vanes.inner_radius_m,
+                                    release_radius_m=base.feed.radius_m, inner_radius_m=base.vanes.inner_radii_m()[0],
                                     half_thickness_m=0.5 * base.vanes.thickness_m)
         ax.plot(grid * scale, ref["speed_m_s"], "--", color=colour, lw=1.1, alpha=0.9,
                 label=f"closed form, {'slide' if rotation == 'locked' else 'slide then roll'} from rest")

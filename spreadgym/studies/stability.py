@@ -78,7 +78,7 @@ def pymunk_tunnelling_fraction(
     spinner = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
     spinner.angular_velocity = omega
     half = 0.5 * scene.vanes.thickness_m
-    vane = pymunk.Segment(spinner, (scene.vanes.inner_radius_m, 0.0), (scene.vane_outer_radius_m, 0.0), half)
+    vane = pymunk.Segment(spinner, (scene.vanes.inner_radii_m()[0], 0.0), (scene.vane_outer_radius_m, 0.0), half)
     vane.elasticity, vane.friction = 0.43, 0.52  # compound fertilizer on MC (the paper scene)
     vane.filter = pymunk.ShapeFilter(categories=0b10, mask=0b01)
     space.add(spinner, vane)

@@ -31,6 +31,11 @@ from spreadgym.errors import ConfigError
         ("spinner.rpm=.nan", "spinner.rpm", "allowed: >= 10, <= 5000"),
         ('sim.granules="200"', "sim.granules", "valid integer"),
         ("sim.granules=200.0", "sim.granules", "valid integer"),
+        ("vanes.inner_radius_m=[0.02,0.03]", "vanes.inner_radius_m", "one value or one per vane (4), got 2"),
+        ("vanes.inner_radius_m=[0.02,0.03,-0.01,0.02]", "vanes.inner_radius_m", "-0.01 outside [0, 2] m"),
+        ("vanes.inner_radius_m=[0.02,0.03,.nan,0.02]", "vanes.inner_radius_m.2", "finite"),
+        ("vanes.pitch_deg=[0,.nan,0,0]", "vanes.pitch_deg.1", "finite"),
+        ("vanes.inner_radius_m=[0.02,0.15,0.02,0.02]", "vanes.inner_radius_m", "must be below the outer radius"),
     ],
 )
 def test_bad_values_are_refused_with_the_key_and_the_range(assignment, key, fragment):

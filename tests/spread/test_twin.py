@@ -41,7 +41,7 @@ def test_twin_field_is_a_typical_field_machine():
 
 
 def test_mirror_of_a_disc_mirrors_its_vanes():
-    s = _alone({"vanes.pitch_deg": [0.0, 20.0, -10.0, 5.0]})
+    s = _alone({"vanes.pitch_deg": [0.0, 20.0, -10.0, 5.0], "vanes.inner_radius_m": [0.05, 0.1, 0.15, 0.08]})
     inner, outer = vane_segments(s)
     m_inner, m_outer = vane_segments(twin.mirror_scene(s))
     # vane k of the mirror is vane N - k of the original, the mirror standing at spinner
@@ -60,7 +60,8 @@ MIRROR_TOLERANCE = {"analytic": (1e-9, 1e-7, 1e-9), "pymunk": (1e-9, 1e-7, 1e-9)
 def test_a_disc_run_on_mirrored_granules_is_the_mirrored_run(model):
     """The models turn either way: the mirror scene on the mirrored granules gives the
     mirrored departures, which is what lets a mirror-image disc reuse the first's run."""
-    s = _alone({"vanes.pitch_deg": [0.0, 20.0, -10.0, 5.0]}, granules=256)
+    s = _alone({"vanes.pitch_deg": [0.0, 20.0, -10.0, 5.0], "vanes.inner_radius_m": [0.05, 0.1, 0.15, 0.08]},
+               granules=256)
     library = load_library()
     granules = sample_granules(s, library.fertilizer(s.fertilizer), s.sim.replicates)
     run = SPINNER_MODELS[model].run(s, granules, resolve_contacts(s, library))

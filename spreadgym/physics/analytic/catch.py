@@ -44,7 +44,7 @@ def vane_geometry(scene: Scene, granule_radius_m: np.ndarray) -> VaneGeometry:
     ang = theta + sense * pitch
     u = np.stack([np.cos(ang), np.sin(ang)], axis=1)
     n = sense * np.stack([-u[:, 1], u[:, 0]], axis=1)
-    r_in, r_out = scene.vanes.inner_radius_m, scene.vane_outer_radius_m
+    r_in, r_out = np.asarray(scene.vanes.inner_radii_m()), scene.vane_outer_radius_m
     p_u = r_in * np.cos(pitch)
     p_n = -r_in * np.sin(pitch)
     x_tip = np.sqrt(np.maximum(r_out * r_out - p_n * p_n, p_u * p_u))
