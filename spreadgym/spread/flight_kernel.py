@@ -100,7 +100,7 @@ def _inverse_spins(t, h, fraction, base, table, idx, lift, out):
 def _dp_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
     """One Dormand-Prince step of length h[q] in every lane q from (x, v) (3, L) at time
     t (L,) with first stage a1: the stages go to sv, sa (7, 3, L) (row 6: the new velocity
-    and its acceleration), the new position to x_new (3, L). kk, lf (2, L): the lanes'
+    and its acceleration), the new position to x_new (3, L). kk (L,), lf (2, L): the lanes'
     drag and lift parameters; base, cs: work arrays of the spin (`_spin_bases`)."""
     _spin_bases(t, h, table, idx, lift, base)
     for c in range(3):
