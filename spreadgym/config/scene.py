@@ -65,38 +65,31 @@ class Vanes(StrictModel):
     material: Optional[str] = Field(default=None, description="default: spinner material")
 
     @model_validator(mode="after")
-    def _pitch_in_range(self) -> "Vanes":
-        pitches = self.pitch_deg if isinstance(self.pitch_deg, list) else [self.pitch_deg]
-        if isinstance(self.pitch_deg, list) and len(pitches) != self.count:
-            raise ValueError(
-                f"pitch_deg: one value or one per vane ({self.count}), got {len(pitches)}"
-            )
-        for p in pitches:
-            if not math.isfinite(p) or abs(p) > MAX_PITCH_DEG:
-                raise ValueError(f"pitch_deg: {p} outside [-{MAX_PITCH_DEG}, {MAX_PITCH_DEG}] deg")
+    def _per_vane_values_in_range(self) -> "Vanes":
+        for key, allowed, (lo, hi) in (("pitch_deg", f"[-{MAX_PITCH_DEG}, {MAX_PITCH_DEG}] deg",
+                                        (-MAX_PITCH_DEG, MAX_PITCH_DEG)),
+                                       ("inner_radius_m", "[0, 2] m", (0.0, 2.0))):
+            values = self.per_vane(key)
+            if len(values) != self.count:
+                raise ValueError(f"{key}: one value or one per vane ({self.count}), got {len(values)}")
+            for value in values:
+                if not (math.isfinite(value) and lo <= value <= hi):
+                    raise ValueError(f"{key}: {value} outside {allowed}")
         return self
 
-    @model_validator(mode="after")
-    def _inner_radii_in_range(self) -> "Vanes":
-        radii = self.inner_radius_m if isinstance(self.inner_radius_m, list) else [self.inner_radius_m]
-        if isinstance(self.inner_radius_m, list) and len(radii) != self.count:
-            raise ValueError(f"inner_radius_m: one value or one per vane ({self.count}), got {len(radii)}")
-        for r in radii:
-            if not (math.isfinite(r) and 0.0 <= r <= 2.0):
-                raise ValueError(f"inner_radius_m: {r} outside [0, 2] m")
-        return self
+    def per_vane(self, key: str) -> list[float]:
+        """A key that takes one value or one per vane (`pitch_deg`, `inner_radius_m`), one
+        entry per vane (length `count` once validated), in its own unit."""
+        value = getattr(self, key)
+        return list(value) if isinstance(value, list) else [value] * self.count
 
     def inner_radii_m(self) -> list[float]:
         """Radius (m) of each vane's inner end (length `count`)."""
-        if isinstance(self.inner_radius_m, list):
-            return list(self.inner_radius_m)
-        return [self.inner_radius_m] * self.count
+        return self.per_vane("inner_radius_m")
 
     def pitches_rad(self) -> list[float]:
         """Pitch of each vane in radians (length `count`)."""
-        if isinstance(self.pitch_deg, list):
-            return [math.radians(p) for p in self.pitch_deg]
-        return [math.radians(self.pitch_deg)] * self.count
+        return [math.radians(p) for p in self.per_vane("pitch_deg")]
 
 
 class Feed(StrictModel):
@@ -358,9 +351,10 @@ def _check_disc(spinner: Spinner, vanes: Vanes, feed: Feed, prefix: str) -> None
     outer = _vane_outer_radius_m(spinner, vanes)
     if outer > radius + 1e-12:
         raise ValueError(f"{prefix}vanes.outer_radius_m: {outer} m is longer than the disc radius {radius} m")
-    if max(vanes.inner_radii_m()) >= outer:
+    longest_start = max(vanes.inner_radii_m())
+    if longest_start >= outer:
         raise ValueError(
-            f"{prefix}vanes.inner_radius_m: {max(vanes.inner_radii_m())} m must be below the outer radius {outer} m"
+            f"{prefix}vanes.inner_radius_m: {longest_start} m must be below the outer radius {outer} m"
         )
     tip_speed = spinner.rpm * RPM_TO_RAD_S * radius
     if tip_speed > MAX_TIP_SPEED_M_S:

@@ -176,8 +176,7 @@ class SettingsSpace:
     def scene_unit(self, scene: Scene) -> np.ndarray:
         """The unit vector of the scene's own settings (clipped into the box; a shared
         pitch axis takes the vanes' mean pitch)."""
-        pitches = scene.vanes.pitch_deg if isinstance(scene.vanes.pitch_deg, list) else [scene.vanes.pitch_deg]
-        pitches = [float(p) for p in pitches] * (scene.vanes.count if len(pitches) == 1 else 1)
+        pitches = [float(p) for p in scene.vanes.per_vane("pitch_deg")]
         values = []
         for axis in self.axes:
             if axis.key == "spinner.rpm":

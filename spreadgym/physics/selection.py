@@ -104,9 +104,8 @@ VALIDATED = {
 
 def outside_validated(scene: Scene) -> list[str]:
     """What puts `scene` outside the envelope `compiled` was validated in (empty: inside)."""
-    pitches = scene.vanes.pitch_deg if isinstance(scene.vanes.pitch_deg, list) else [scene.vanes.pitch_deg]
-    values = {"rpm": [scene.spinner.rpm], "pitch_deg": pitches, "drop_height_m": [scene.feed.drop_height_m],
-              "radius_m": [scene.spinner.radius_m]}
+    values = {"rpm": [scene.spinner.rpm], "pitch_deg": scene.vanes.per_vane("pitch_deg"),
+              "drop_height_m": [scene.feed.drop_height_m], "radius_m": [scene.spinner.radius_m]}
     out = []
     for key, (lo, hi) in VALIDATED.items():
         bad = [v for v in values[key] if not lo - 1e-9 <= v <= hi + 1e-9]
