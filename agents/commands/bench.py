@@ -80,8 +80,7 @@ def reference_rows(references, out: Path, say) -> list[dict]:
     """Converged references of the family (resumed from `out`), full and fast model, with tables."""
     rows = []
     for model in ("pymunk", "compiled", "analytic"):
-        results = references.compute_references(out, model=model, progress=say)
-        references.write_table(results, out / f"{model}.md")
+        results = references.compute_references(out, model=model, progress=say)  # also writes <model>.md
         rows += [{"model": model, "scene": r["name"], "cv_percent": r["cv_percent_at_target"],
                   "cv_standard_error_percent": r["cv_standard_error_percent"],
                   "effective_swath_m": r["effective_swath_m"], "granules": r["granules"]} for r in results]

@@ -42,7 +42,8 @@ def compute_references(out_dir: Path, model: str = "pymunk", runs: Optional[int]
 
     A stored reference is reused when its model and overrides match and, if `runs` is
     given, its run count too; a missing one is computed with `runs` (default
-    DEFAULT_RUNS). Each stored file records how many runs it pooled."""
+    DEFAULT_RUNS). Each stored file records how many runs it pooled. DIR/<model>.md is
+    rewritten with every stored scene of the family."""
     family = reference_family(overrides)
     unknown = sorted(set(names or []) - set(family))
     if unknown:
@@ -68,7 +69,8 @@ def compute_references(out_dir: Path, model: str = "pymunk", runs: Optional[int]
             print_json(payload, handle)
         partial.replace(path)  # never a half-written result under the final name
         results.append(json.loads(path.read_text(encoding="utf-8")))
-    write_table(results, Path(out_dir) / f"{model}.md")
+    stored = load_references(out_dir, model)  # the table lists every stored scene, not just these
+    write_table([stored[name] for name in family if name in stored], Path(out_dir) / f"{model}.md")
     return results
 
 

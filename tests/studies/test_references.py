@@ -29,3 +29,10 @@ def test_a_stored_reference_is_reused_when_it_matches_and_recomputed_when_it_doe
     assert stored["settings"] == {"model": "analytic", "runs": 3, "overrides": {"sim.granules": 32}}
     assert not list(tmp_path.rglob("*.partial")) and (tmp_path / "analytic.md").is_file()
     assert json.loads((tmp_path / "analytic" / "paper.json").read_text())["granules"] == 96
+
+
+def test_the_table_lists_every_stored_scene_when_one_is_added(tmp_path):
+    compute_references(tmp_path, model="analytic", runs=2, names=["paper"], overrides=TINY)
+    compute_references(tmp_path, model="analytic", runs=2, names=["field"], overrides=TINY)
+    rows = [line.split("|")[1].strip() for line in (tmp_path / "analytic.md").read_text().splitlines()[4:]]
+    assert rows == ["paper", "field"]  # family order, the earlier scene kept
