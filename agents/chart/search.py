@@ -3,8 +3,12 @@ fast objective, scored honestly, then verify the winner with the full model.
 
 * Objective (minimised): the corrected CV at the width (100 % when nothing lands) plus
   `SWATH_PENALTY_PERCENT` times the relative shortfall of the effective swath below the
-  width, max(0, W - W_eff) / W. A CV at or under the threshold already means W_eff >= W;
-  the penalty steers a search that is still above it towards wider patterns.
+  width, max(0, W - W_eff) / W, plus `LOST_MASS_PENALTY_PERCENT` times the share of the
+  released mass that missed the trays (retained on the spinner, or on a twin machine
+  thrown onto the other disc, whose fate is not modelled). A CV at or under the
+  threshold already means W_eff >= W; the swath penalty steers a search that is still
+  above it towards wider patterns, and the mass penalty keeps it from buying evenness
+  by losing mass.
 * Search: CMA-ES over the settings box (`agents.baselines.cmaes_search`), started at the
   scene's own settings. Honest scoring as in the baselines: every evaluation on a fresh
   granule sample (its own seed), the search gets 1 - RESCORE_FRACTION of the budget and
@@ -36,6 +40,7 @@ from spreadgym.spread.pipeline import run_scene
 from spreadgym.spread.reference import pool_runs, reference_from
 
 SWATH_PENALTY_PERCENT = 100.0  # percentage points per unit relative swath shortfall
+LOST_MASS_PENALTY_PERCENT = 100.0  # percentage points per unit share of mass not in the trays
 CMA_SEED_RANGE = 100_000  # cma seeds its generator with seed * 1000 + restart: keep it below 2**32
 
 
@@ -44,7 +49,10 @@ def objective(metrics: RunMetrics, width_m: float) -> tuple[float, float, Option
     cv = metrics.cv_percent_at_target
     cv = WORST_CV_PERCENT if cv is None else float(cv)
     shortfall = max(0.0, width_m - float(metrics.effective_swath_m)) / width_m
-    return cv + SWATH_PENALTY_PERCENT * shortfall, cv, metrics.cv_standard_error_percent
+    landed = metrics.landed_fraction
+    lost = 1.0 if landed is None else max(0.0, 1.0 - landed)
+    cost = cv + SWATH_PENALTY_PERCENT * shortfall + LOST_MASS_PENALTY_PERCENT * lost
+    return cost, cv, metrics.cv_standard_error_percent
 
 
 def run_cell(spec: ChartSpec, cell: Cell) -> dict:

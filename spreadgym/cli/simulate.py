@@ -67,7 +67,8 @@ def summary(m: dict, scene_name: str) -> str:
          + (f", 95 % CI {ci[0]:.1f}-{ci[1]:.1f} %" if ci else "")),
         ("effective swath", f"{m['effective_swath_m']:g} m (CV <= {m['cv_threshold_percent']:g} %)"),
         ("mass", f"released {1e3 * m['mass']['released_kg']:.2f} g, landed {1e3 * m['mass']['landed_kg']:.2f} g, "
-                 f"retained {1e3 * m['mass']['retained_kg']:.2f} g"),
+                 f"retained {1e3 * m['mass']['retained_kg']:.2f} g"
+                 + (f", intercepted {1e3 * m['mass']['intercepted_kg']:.2f} g" if m['mass']['intercepted_kg'] else "")),
         ("wall time", f"{m['wall_s']:.2f} s"),
     ]
     return f"scene {scene_name}\n" + format_table(rows, ("quantity", "value"))

@@ -37,6 +37,7 @@ class RunMetrics:
     trays: Trays  # the single pass caught on the row of trays
     released_kg: float
     retained_kg: float  # mass that never left the spinner
+    intercepted_kg: float = 0.0  # twin discs: mass thrown onto the other disc, not in the pattern
     notes: list[str] = field(default_factory=list)
     wall_s: float = 0.0
 
@@ -69,7 +70,8 @@ class RunMetrics:
             "effective_swath_m": self.effective_swath_m,
             "cv_curve": {"bout_width_m": self.curve_bout_width_m, "cv_percent": self.curve_cv_percent},
             "trays": {"center_m": self.trays.center_m, "mass_kg": self.trays.mass_kg},
-            "mass": {"released_kg": self.released_kg, "landed_kg": self.landed_kg, "retained_kg": self.retained_kg},
+            "mass": {"released_kg": self.released_kg, "landed_kg": self.landed_kg, "retained_kg": self.retained_kg,
+                     "intercepted_kg": self.intercepted_kg},
             "notes": self.notes,
             "wall_s": self.wall_s,
         }

@@ -87,7 +87,8 @@ def run_scene(
     placed = [twin.moved(t, d.centre_m) for t, d in zip(throws, parts)]
     machine = twin.combined(placed)
     granules, departure, launch = machine.granules, machine.departure, machine.launch
-    flying = launch.departed
+    lost = twin.intercepted(placed, parts, mirror)  # thrown onto the other disc: not in the pattern
+    flying = launch.departed & ~lost
     counts = [t.granules.count for t in throws]
     disc_height = np.repeat([d.scene.spinner.height_m for d in parts], counts)[flying]
     velocity3 = np.column_stack([local.launch.velocity_m_s[flying], local.launch.vertical_velocity_m_s[flying]])
@@ -95,7 +96,7 @@ def run_scene(
     # a mirrored throw in a flight without crosswind lands mirrored, to the bit (the
     # flight's arithmetic is odd in x): fly the first disc's granules only
     fly_once = mirror and scene.flight.wind_m_s[0] == 0.0
-    flown = int(throws[0].launch.departed.sum()) if fly_once else int(flying.sum())
+    flown = int(flying[:throws[0].granules.count].sum()) if fly_once else int(flying.sum())
     landing = flight_model.fly(
         local.launch.position_m[flying][:flown], height[:flown], velocity3[:flown],
         granules.diameter_m[flying][:flown], granules.density_kg_m3, scene.flight,
@@ -136,7 +137,8 @@ def run_scene(
         trays=trays,
         released_kg=float(granules.mass_kg.sum()),
         retained_kg=float(granules.mass_kg[~departure.departed].sum()),
-        notes=_notes(scene, chosen, departure, launch, trays) + twin.crossing_notes(placed, parts),
+        intercepted_kg=float(granules.mass_kg[lost].sum()),
+        notes=_notes(scene, chosen, departure, launch, trays) + twin.interception_notes(placed, parts, lost),
         wall_s=time.perf_counter() - started,
     )
     return SimulationResult(scene, granules, departure, launch, landing, trays, replicate_masses, metrics)

@@ -7,13 +7,15 @@ minus its centre), with every spinner model and deflector method as they are; th
 launch states are moved back by the centre and both discs' granules fly and land as
 one batch, so the tray pattern is that of both.
 
-Assumption: the discs do not interact. A granule of one disc never reaches the other
-disc or its granules (the plan-view paths of the two throws may cross, but granules
-are far apart and collisions between flying granules are not modelled on one disc
-either), and it passes only the plates. `crossing_notes` checks the first part on every
-run: a departed granule whose straight plan-view path from the edge of the plate zone
-passes within the other disc's radius would meet that disc (its vanes stand above the
-disc plane where the granule flies), and the run then says what mass fraction does so.
+The discs do not interact in flight: the plan-view paths of the two throws may cross,
+but granules are far apart (collisions between flying granules are not modelled on one
+disc either), and a granule passes only the plates. A departed granule whose straight
+plan-view path from the edge of the plate zone passes within the other disc's radius
+would meet that disc (its vanes stand above the disc plane where the granule flies);
+what the other disc's vanes would do with it is not modelled, so `intercepted` marks it
+and the run takes it out of the pattern, counts its mass as intercepted (not landed) and
+says how much in a note. A search therefore gains nothing from throwing onto the other
+disc, and the mass lost shows in every score that counts the landed fraction.
 
 The second disc is by default the mirror image of the first across the centreline.
 The models handle either sense of rotation, so any second disc can run as it is; when
@@ -188,21 +190,37 @@ def _joined(states: list[Departure]) -> Departure:
                      tracks=[t for s in states for t in s.tracks])
 
 
-def crossing_notes(throws: list[Throw], parts: list[Disc]) -> list[str]:
-    """Notes on granules (machine frame) whose plan-view path from launch meets the other disc."""
+def intercepted(throws: list[Throw], parts: list[Disc], mirror: bool) -> np.ndarray:
+    """(N,) bool over the granules of all discs in order (machine frame): departed granules
+    whose plan-view path from launch passes within the other disc's radius (plus their
+    own). With `mirror`, the second disc's throw is the first's mirrored and takes the
+    first's marks, so the pair stays an exact mirror image."""
     if len(parts) < 2:
-        return []
-    notes = []
+        return np.zeros(throws[0].granules.count, dtype=bool)
+    marks = []
+    for throw, other in zip(throws, parts[::-1]):
+        if marks and mirror:
+            marks.append(marks[0])
+            continue
+        launch = throw.launch
+        reach = other.scene.spinner.radius_m + throw.granules.radius_m
+        marks.append(launch.departed & _ray_meets_circle(launch.position_m, launch.velocity_m_s,
+                                                          np.asarray(other.centre_m), reach))
+    return np.concatenate(marks)
+
+
+def interception_notes(throws: list[Throw], parts: list[Disc], marks: np.ndarray) -> list[str]:
+    """One note per disc that throws mass onto the other disc (`marks` from `intercepted`)."""
+    notes, start = [], 0
     for i, (throw, other) in enumerate(zip(throws, parts[::-1])):
-        launch, gone = throw.launch, throw.launch.departed
-        reach = other.scene.spinner.radius_m + throw.granules.radius_m[gone]
-        meets = _ray_meets_circle(launch.position_m[gone], launch.velocity_m_s[gone], np.asarray(other.centre_m),
-                                  reach)
         mass = throw.granules.mass_kg
-        if meets.any():
-            share = 100.0 * mass[gone][meets].sum() / mass.sum()
-            notes.append(f"{share:.2g} % of the mass of disc {i + 1} flies over the other disc (axis at x = "
-                         f"{other.centre_m[0]:g} m); the discs are simulated as not meeting each other's granules")
+        mine = marks[start:start + mass.size]
+        start += mass.size
+        if len(parts) > 1 and mine.any():
+            share = 100.0 * mass[mine].sum() / mass.sum()
+            notes.append(f"{share:.2g} % of the mass of disc {i + 1} flies onto the other disc (axis at x = "
+                         f"{other.centre_m[0]:g} m): taken out of the pattern as intercepted, since what that "
+                         f"disc's vanes would do with it is not modelled")
     return notes
 
 

@@ -155,3 +155,18 @@ def test_bad_input_is_one_line_and_exit_2_with_nothing_written(argv, message, tm
     assert message in err[-1]
     assert not (out / "chart.csv").exists() and not (out / "cells").exists()
     assert not (out / "manifest.json").exists()
+
+
+def test_the_search_objective_charges_mass_that_missed_the_trays():
+    from types import SimpleNamespace
+
+    from spreadgym.agents.chart.search import objective
+
+    def metrics(landed_fraction, swath=24.0):
+        return SimpleNamespace(cv_percent_at_target=6.0, cv_standard_error_percent=0.5, effective_swath_m=swath,
+                               landed_fraction=landed_fraction)
+
+    assert objective(metrics(1.0), 24.0) == (6.0, 6.0, 0.5)
+    assert objective(metrics(0.95), 24.0)[0] == pytest.approx(6.0 + 5.0)  # 5 % intercepted or retained
+    assert objective(metrics(0.95, swath=18.0), 24.0)[0] == pytest.approx(6.0 + 25.0 + 5.0)
+    assert objective(metrics(None), 24.0)[0] == pytest.approx(106.0)  # nothing released

@@ -23,7 +23,7 @@ def _metrics(released_kg: float, tray_masses_kg: list[float]) -> RunMetrics:
 def test_landed_mass_and_fraction_come_from_the_trays():
     m = _metrics(10.0, [2.0, 4.0, 3.0])
     assert m.landed_kg == 9.0 and m.landed_fraction == 0.9
-    assert m.to_json()["mass"] == {"released_kg": 10.0, "landed_kg": 9.0, "retained_kg": 1.0}
+    assert m.to_json()["mass"] == {"released_kg": 10.0, "landed_kg": 9.0, "retained_kg": 1.0, "intercepted_kg": 0.0}
     assert _metrics(0.0, [0.0, 0.0, 0.0]).landed_fraction is None
 
 

@@ -156,14 +156,28 @@ def test_bad_twin_geometry_is_named(overrides, key, words):
     assert "\n" not in str(caught.value)
 
 
-def test_granules_crossing_the_other_disc_are_counted():
+def test_granules_thrown_onto_the_other_disc_are_taken_out_of_the_pattern():
     p = np.array([[0.7, 0.0], [0.7, 0.0], [0.7, 0.0]])
     v = np.array([[-1.0, 0.0], [1.0, 0.0], [-1.0, 1.0]])
     meets = twin._ray_meets_circle(p, v, np.array([-0.4, 0.0]), np.full(3, 0.3))
     assert meets.tolist() == [True, False, False]
-    r = run_scene(_scene(), model="analytic")  # twin-field: a few per cent leave over the other disc
-    crossing = [n for n in r.metrics.notes if "flies over the other disc" in n]
-    assert len(crossing) == 2
+    r = run_scene(_scene({"feed.angle_deg": 100.0}), model="analytic")  # ~5 % thrown inwards
+    notes = [n for n in r.metrics.notes if "flies onto the other disc" in n]
+    assert len(notes) == 2
+    # the marks, found again from the machine-frame launches of each disc on its own
+    half = r.granules.count // 2
+    launch, radius = r.launch, r.granules.radius_m
+    hits = [launch.departed[s] & twin._ray_meets_circle(launch.position_m[s], launch.velocity_m_s[s],
+                                                        np.array([-x, 0.0]), 0.3 + radius[s])
+            for s, x in ((slice(0, half), HALF), (slice(half, None), -HALF))]
+    hit = np.concatenate(hits)
+    assert np.array_equal(hits[0], hits[1])  # the mirrored disc's marks are the first's
+    mass = r.metrics.to_json()["mass"]
+    assert mass["intercepted_kg"] == pytest.approx(r.granules.mass_kg[hit].sum(), rel=1e-12)
+    assert mass["intercepted_kg"] > 0.03 * mass["released_kg"]
+    assert mass["released_kg"] == pytest.approx(mass["landed_kg"] + mass["retained_kg"] + mass["intercepted_kg"],
+                                                rel=1e-12)
+    assert r.landing.position_m.shape[0] == np.count_nonzero(launch.departed & ~hit)
     assert not [n for n in run_scene(load_scene("field", {"sim.granules": 256}), model="analytic").metrics.notes
                 if "other disc" in n]
 
