@@ -29,6 +29,7 @@ class SimulationResult:
     granules: GranuleBatch
     departure: Departure  # state at the disc edge
     launch: Departure  # state where the flight starts (after the deflector zone)
+    landed: np.ndarray  # (N,) bool: the granules whose landings `landing` holds, in order
     landing: flight_model.Landing
     trays: pattern.Trays
     replicate_masses_kg: np.ndarray  # (K, T) tray masses of each independent replicate
@@ -88,7 +89,7 @@ def run_scene(
     machine = twin.combined(placed)
     granules, departure, launch = machine.granules, machine.departure, machine.launch
     lost = twin.intercepted(placed, parts, mirror)  # thrown onto the other disc: not in the pattern
-    flying = launch.departed & ~lost
+    flying = launch.departed & ~lost  # the granules that fly and land
     counts = [t.granules.count for t in throws]
     disc_height = np.repeat([d.scene.spinner.height_m for d in parts], counts)[flying]
     velocity3 = np.column_stack([local.launch.velocity_m_s[flying], local.launch.vertical_velocity_m_s[flying]])
@@ -141,7 +142,7 @@ def run_scene(
         notes=_notes(scene, chosen, departure, launch, trays) + twin.interception_notes(placed, parts, lost),
         wall_s=time.perf_counter() - started,
     )
-    return SimulationResult(scene, granules, departure, launch, landing, trays, replicate_masses, metrics)
+    return SimulationResult(scene, granules, departure, launch, flying, landing, trays, replicate_masses, metrics)
 
 
 def departure_summary(departure: Departure, omega_rad_s: float) -> dict:

@@ -56,7 +56,7 @@ def pool_runs(scene: Scene, runs: int, model: str = "auto", library: Optional[Ma
     result = None
     for j in range(runs):
         result = run_scene(scene, model=model, library=library, first_replicate=j * per_run)
-        flying = result.launch.departed
+        flying = result.landed
         xs.append(result.landing.position_m[:, 0])
         masses.append(result.granules.mass_kg[flying])
         replicates.append(result.granules.replicate[flying] + j * per_run)

@@ -36,7 +36,7 @@ def _row(measure: str, scene: str, case: str, value: float, spread: Optional[flo
 
 def _launch(result):
     """fly()'s arguments and the spins of one run's flying granules."""
-    launch, flying = result.launch, result.launch.departed
+    launch, flying = result.launch, result.landed
     args = (launch.position_m[flying], result.scene.spinner.height_m + launch.height_m[flying],
             np.column_stack([launch.velocity_m_s[flying], launch.vertical_velocity_m_s[flying]]),
             result.granules.diameter_m[flying], result.granules.density_kg_m3)

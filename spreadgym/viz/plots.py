@@ -220,7 +220,7 @@ def landing_scatter(ax, result, max_points: int = 3000, colorbar: bool = True) -
     """Landing points on the ground (x across, y along), spinner at the origin, target
     bout edges (+-W/2) dashed."""
     pos = result.landing.position_m
-    diameter_mm = 1e3 * result.granules.diameter_m[result.launch.departed]
+    diameter_mm = 1e3 * result.granules.diameter_m[result.landed]
     if pos.shape[0] > max_points:
         pick = np.unique(np.linspace(0, pos.shape[0] - 1, max_points).round().astype(int))
         pos, diameter_mm = pos[pick], diameter_mm[pick]

@@ -36,5 +36,5 @@ def test_json_holds_the_run_and_its_trays():
                           "cv_standard_error_percent", "cv_raw_percent", "cv_ci_percent", "effective_swath_m",
                           "cv_curve", "trays", "mass", "notes", "wall_s"]
     assert data["trays"]["mass_kg"] is result.trays.mass_kg  # one tray row, not a copy
-    assert data["mass"]["landed_kg"] == pytest.approx(float(result.granules.mass_kg[result.launch.departed].sum()),
+    assert data["mass"]["landed_kg"] == pytest.approx(float(result.granules.mass_kg[result.landed].sum()),
                                                       rel=1e-12)
