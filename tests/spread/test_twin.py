@@ -34,6 +34,9 @@ def test_twin_field_is_a_typical_field_machine():
     s = load_scene("twin-field")
     assert 0.25 <= s.spinner.radius_m <= 0.35 and 540 <= s.spinner.rpm <= 1000
     assert 2 <= s.vanes.count <= 4 and 0.8 <= s.spinner.height_m <= 1.0
+    inner, outer = vane_segments(s)
+    lengths = np.linalg.norm(outer - inner, axis=1)
+    assert lengths[1] < 0.7 * lengths[0] and lengths[3] < 0.7 * lengths[2]  # short/long pairs
     assert s.disc_centres_m == [(HALF, 0.0), (-HALF, 0.0)]
     second = s.second_disc()
     assert second[0].direction == "cw" and second[2].angle_deg == 180.0 - s.feed.angle_deg
