@@ -211,12 +211,13 @@ def intercepted(throws: list[Throw], parts: list[Disc], mirror: bool) -> np.ndar
 
 def interception_notes(throws: list[Throw], parts: list[Disc], marks: np.ndarray) -> list[str]:
     """One note per disc that throws mass onto the other disc (`marks` from `intercepted`)."""
-    notes, start = [], 0
-    for i, (throw, other) in enumerate(zip(throws, parts[::-1])):
+    if len(parts) < 2:
+        return []
+    notes = []
+    counts = [t.granules.count for t in throws]
+    for i, (throw, other, mine) in enumerate(zip(throws, parts[::-1], np.split(marks, np.cumsum(counts)[:-1]))):
         mass = throw.granules.mass_kg
-        mine = marks[start:start + mass.size]
-        start += mass.size
-        if len(parts) > 1 and mine.any():
+        if mine.any():
             share = 100.0 * mass[mine].sum() / mass.sum()
             notes.append(f"{share:.2g} % of the mass of disc {i + 1} flies onto the other disc (axis at x = "
                          f"{other.centre_m[0]:g} m): taken out of the pattern as intercepted, since what that "
