@@ -58,6 +58,7 @@ def summary(m: dict, scene_name: str) -> str:
         ("model", f"{m['model']} ({m['model_reason']})"),
         ("time step", f"{m['dt_s']:.3g} s" if m["dt_s"] else "closed form"),
         ("granules", f"{m['granules']} ({m['outcomes']['departed']} departed)"),
+        ("release angles", f"{m['angle_copies']} per granule ({m['angle_copies_reason']})"),
         ("departure speed", f"{d['speed_mean_m_s']:.2f} +- {d['speed_std_m_s']:.2f} m/s"),
         ("departure angle", f"{d['angle_mean_deg']:.1f} deg from the tangent"),
         ("granule spin", f"{d['spin_mean_rad_s']:.0f} rad/s"),

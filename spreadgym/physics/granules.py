@@ -79,6 +79,9 @@ def replicate_sizes(granules: int, replicates: int) -> np.ndarray:
     return np.full(k, granules // k)
 
 
+RELEASE_CLIP_SHARE = 0.95
+"""Release points farther out than this share of the vanes' outer radius are pulled back to it."""
+
 SOBOL_BITS = 30
 """Bits of the Sobol points (scipy's default, so its engine gives the same points)."""
 
@@ -172,7 +175,7 @@ def sample_granules(scene: Scene, fertilizer: Fertilizer, replicates: int = 1,
     release = np.tile(base, (n, 1))
     if feed.spread_m > 0:
         release = release + feed.spread_m * np.column_stack([ndtri(u_x), ndtri(u_y)])
-        release = _clip_inside(release, 0.95 * scene.vane_outer_radius_m)
+        release = _clip_inside(release, RELEASE_CLIP_SHARE * scene.vane_outer_radius_m)
     phase = 2.0 * math.pi * u_phase
     replicate = np.repeat(np.arange(sizes.size), sizes)
     return GranuleBatch(diameter, mass, density, release, phase, replicate)

@@ -91,6 +91,16 @@ def _t_quantile(dof: int) -> float:
     return float(stats.t.ppf(0.5 + CONFIDENCE_LEVEL / 2, dof))
 
 
+@dataclass(frozen=True)
+class TraySample:
+    """What a row of trays catches, per landed granule (or release-angle copy): where it
+    lands across the track (m), its mass (kg) and its independent replicate."""
+
+    x_m: np.ndarray
+    mass_kg: np.ndarray
+    replicate: np.ndarray
+
+
 def replicate_tray_masses(x_m: np.ndarray, mass_kg: np.ndarray, replicate: np.ndarray, replicates: int,
                           tray_width_m: float, min_half_width_m: float = 0.0) -> tuple[pattern.Trays, np.ndarray]:
     """The pooled `Trays` and the (K, T) tray masses of each replicate on the same row.

@@ -20,7 +20,9 @@ class RunMetrics:
     model: str  # spinner model that ran
     model_reason: str  # why it was chosen
     dt_s: Optional[float]  # time step of a stepped model; None for closed forms
-    granules: int
+    granules: int  # simulated on the spinner
+    angle_copies: int  # release angles per simulated granule in the pattern (spread.rotations)
+    angle_copies_reason: str  # why that many
     outcomes: dict[str, int]  # granule count per outcome on the spinner
     departure: dict[str, Optional[float]]  # means at the disc edge (see pipeline.departure_summary)
     target_swath_m: float
@@ -57,6 +59,8 @@ class RunMetrics:
             "model_reason": self.model_reason,
             "dt_s": self.dt_s,
             "granules": self.granules,
+            "angle_copies": self.angle_copies,
+            "angle_copies_reason": self.angle_copies_reason,
             "outcomes": self.outcomes,
             "departure": self.departure,
             "target_swath_m": self.target_swath_m,

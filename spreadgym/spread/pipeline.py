@@ -13,24 +13,28 @@ from typing import Callable, Optional
 import numpy as np
 
 from spreadgym.config.materials import MaterialLibrary, load_library
-from spreadgym.config.scene import Scene
+from spreadgym.config.scene import Flight, Scene
 from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.departure import Departure, tilted_by_cone
 from spreadgym.physics.granules import GranuleBatch, sample_granules
 from spreadgym.physics.selection import SPINNER_MODELS
-from spreadgym.spread import estimate, pattern, twin
+from spreadgym.spread import estimate, pattern, rotations, twin
 from spreadgym.spread import flight as flight_model
 from spreadgym.spread.metrics import RunMetrics
 
 
 @dataclass
 class SimulationResult:
+    """One run: the simulated granules (machine frame) and the tray pattern of their
+    `sample` (their release-angle copies when `metrics.angle_copies` > 1)."""
+
     scene: Scene
     granules: GranuleBatch
     departure: Departure  # state at the disc edge
     launch: Departure  # state where the flight starts (after the deflector zone)
     landed: np.ndarray  # (N,) bool: the granules whose landings `landing` holds, in order
     landing: flight_model.Landing
+    sample: estimate.TraySample  # what the trays caught: landing across the track, mass, replicate
     trays: pattern.Trays
     replicate_masses_kg: np.ndarray  # (K, T) tray masses of each independent replicate
     metrics: RunMetrics
@@ -71,10 +75,12 @@ def run_scene(
     chosen, reason = twin.choose_for_discs(parts, model)
     fertilizer = library.fertilizer(scene.fertilizer)
     throws: list[twin.Throw] = []
+    turns: list[rotations.Turn] = []  # each disc's release-angle copies (spread.rotations)
     mirror = False  # the second disc's throw is the first's mirrored
     for disc in parts:
         if throws and twin.is_mirror_image(parts[0].scene, disc.scene):
             throws.append(twin.mirrored(throws[0]))
+            turns.append(turns[0].mirrored())
             mirror = True
             continue
         granules = sample_granules(disc.scene, fertilizer, scene.sim.replicates, first_replicate)
@@ -83,6 +89,9 @@ def run_scene(
                                    np.radians(disc.scene.spinner.cone_deg))
         launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
         throws.append(twin.Throw(granules, departure, launch))
+        copies, copies_reason = rotations.copies_for(disc.scene)
+        turns.append(rotations.Turn(rotations.angle_shifts(granules, disc.scene, copies, scene.sim.seed,
+                                                           first_replicate)))
     # every disc flies in its own frame; the pattern is in the machine frame
     local = twin.combined(throws)
     placed = [twin.moved(t, d.centre_m) for t, d in zip(throws, parts)]
@@ -91,27 +100,30 @@ def run_scene(
     lost = twin.intercepted(placed, parts, mirror)  # thrown onto the other disc: not in the pattern
     flying = launch.departed & ~lost  # the granules that fly and land
     counts = [t.granules.count for t in throws]
-    disc_height = np.repeat([d.scene.spinner.height_m for d in parts], counts)[flying]
-    velocity3 = np.column_stack([local.launch.velocity_m_s[flying], local.launch.vertical_velocity_m_s[flying]])
-    height = np.maximum(disc_height + local.launch.height_m[flying], 0.0)
-    # a mirrored throw in a flight without crosswind lands mirrored, to the bit (the
-    # flight's arithmetic is odd in x): fly the first disc's granules only
+    disc_height = np.repeat([d.scene.spinner.height_m for d in parts], counts)
+    centre = np.repeat(np.asarray([d.centre_m for d in parts]), counts, axis=0)
+    # a mirrored throw in a flight without crosswind lands mirrored, to the bit: fly the first disc only
     fly_once = mirror and scene.flight.wind_m_s[0] == 0.0
-    flown = int(flying[:throws[0].granules.count].sum()) if fly_once else int(flying.sum())
-    landing = flight_model.fly(
-        local.launch.position_m[flying][:flown], height[:flown], velocity3[:flown],
-        granules.diameter_m[flying][:flown], granules.density_kg_m3, scene.flight,
-        spin_rad_s=local.launch.spin_rad_s[flying][:flown],
-    )
-    if fly_once:
-        landing = twin.mirrored_landing(landing)
-    if scene.twin is not None:
-        centre = np.repeat(np.asarray([d.centre_m for d in parts]), counts, axis=0)[flying]
-        landing = flight_model.Landing(landing.position_m + centre, landing.time_s)
-    landed_mass = granules.mass_kg[flying]
+    if max(t.copies for t in turns) == 1:
+        landing = _flight(local.launch, granules, flying, disc_height, scene.flight,
+                          int(flying[:counts[0]].sum()) if fly_once else None)
+        landing = flight_model.Landing(landing.position_m + centre[flying], landing.time_s)
+        sample = estimate.TraySample(landing.position_m[:, 0], granules.mass_kg[flying], granules.replicate[flying])
+        lost_kg = [float(m.sum()) for m in np.split(granules.mass_kg * lost, np.cumsum(counts)[:-1])]
+    else:  # every departed granule flies: its copies may miss the other disc where it does not
+        gone = local.launch.departed
+        flown = _flight(local.launch, granules, gone, disc_height, scene.flight,
+                        int(gone[:counts[0]].sum()) if fly_once else None)
+        local_landing = np.full((granules.count, 2), np.nan)
+        local_landing[gone] = flown.position_m
+        time_s = np.full(granules.count, np.nan)
+        time_s[gone] = flown.time_s
+        landing = flight_model.Landing(local_landing[flying] + centre[flying], time_s[flying])
+        sample, lost_kg = rotations.copied_sample(throws, np.split(local_landing, np.cumsum(counts)[:-1]), turns,
+                                                 parts, mirror)
     p = scene.pattern
     trays, replicate_masses = estimate.replicate_tray_masses(
-        landing.position_m[:, 0], landed_mass, granules.replicate[flying], int(granules.replicate.max()) + 1,
+        sample.x_m, sample.mass_kg, sample.replicate, int(granules.replicate.max()) + 1,
         p.tray_width_m, min_half_width_m=p.target_swath_m)
     at_target = estimate.estimate_cv(replicate_masses, p.tray_width_m, p.target_swath_m, p.driving)
     has_mass = trays.total_kg > 0.0
@@ -122,6 +134,8 @@ def run_scene(
         model_reason=reason,
         dt_s=departure.dt_s if departure.dt_s > 0.0 else None,  # None: closed forms, no step
         granules=granules.count,
+        angle_copies=max(t.copies for t in turns),
+        angle_copies_reason=copies_reason,
         outcomes=departure.outcome_counts(),
         departure=departure_summary(throws[0].departure, scene.spinner.omega_rad_s),
         target_swath_m=p.target_swath_m,
@@ -138,11 +152,29 @@ def run_scene(
         trays=trays,
         released_kg=float(granules.mass_kg.sum()),
         retained_kg=float(granules.mass_kg[~departure.departed].sum()),
-        intercepted_kg=float(granules.mass_kg[lost].sum()),
-        notes=_notes(scene, chosen, departure, launch, trays) + twin.interception_notes(placed, parts, lost),
+        intercepted_kg=float(sum(lost_kg)),
+        notes=_notes(scene, chosen, departure, launch, trays) + twin.interception_notes(throws, parts, lost_kg),
         wall_s=time.perf_counter() - started,
     )
-    return SimulationResult(scene, granules, departure, launch, flying, landing, trays, replicate_masses, metrics)
+    return SimulationResult(scene, granules, departure, launch, flying, landing, sample, trays, replicate_masses,
+                            metrics)
+
+
+def _flight(launch: Departure, granules: GranuleBatch, flying: np.ndarray, disc_height_m: np.ndarray,
+            flight: Flight, mirrored_after: Optional[int]) -> flight_model.Landing:
+    """Landings of the `flying` granules (disc frames). With `mirrored_after` = n, the
+    flying granules are a disc pair whose second half mirrors the first n, and without
+    crosswind the mirrored granules land mirrored, to the bit (the flight's arithmetic is
+    odd in x): only the first n fly."""
+    velocity3 = np.column_stack([launch.velocity_m_s[flying], launch.vertical_velocity_m_s[flying]])
+    height = np.maximum(disc_height_m[flying] + launch.height_m[flying], 0.0)
+    flown = int(flying.sum()) if mirrored_after is None else mirrored_after
+    landing = flight_model.fly(
+        launch.position_m[flying][:flown], height[:flown], velocity3[:flown],
+        granules.diameter_m[flying][:flown], granules.density_kg_m3, flight,
+        spin_rad_s=launch.spin_rad_s[flying][:flown],
+    )
+    return landing if mirrored_after is None else twin.mirrored_landing(landing)
 
 
 def departure_summary(departure: Departure, omega_rad_s: float) -> dict:

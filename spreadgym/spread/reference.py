@@ -4,7 +4,8 @@ Run j of a reference draws the replicates j R .. (j + 1) R - 1 of the scene's se
 (R = `sim.replicates` per run), so pooling K runs of N granules gives exactly the one
 run of K N granules in K R replicates, and the CV's jackknife then rests on all K R
 replicates. The landing points are kept per granule (a float, a mass and a replicate
-index each), so the pooled tray row is as wide as the widest landing.
+index each; with release-angle copies, per copy), so the pooled tray row is as wide as
+the widest landing.
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ class PooledLandings:
     mass_kg: np.ndarray
     replicate: np.ndarray
     replicates: int
-    granules: int  # released, landed or not
+    granules: int  # simulated on the spinner, landed or not
+    angle_copies: int  # release angles per simulated granule (spread.rotations)
     released_kg: float
     model: str
     model_reason: str
@@ -56,18 +58,17 @@ def pool_runs(scene: Scene, runs: int, model: str = "auto", library: Optional[Ma
     result = None
     for j in range(runs):
         result = run_scene(scene, model=model, library=library, first_replicate=j * per_run)
-        flying = result.landed
-        xs.append(result.landing.position_m[:, 0])
-        masses.append(result.granules.mass_kg[flying])
-        replicates.append(result.granules.replicate[flying] + j * per_run)
-        granules += result.granules.count
+        xs.append(result.sample.x_m)
+        masses.append(result.sample.mass_kg)
+        replicates.append(result.sample.replicate + j * per_run)
+        granules += result.metrics.granules
         released += float(result.granules.mass_kg.sum())
         wall += result.metrics.wall_s
         if progress:
             progress(j + 1, runs)
     return PooledLandings(np.concatenate(xs), np.concatenate(masses), np.concatenate(replicates),
-                          runs * per_run, granules, released, result.metrics.model, result.metrics.model_reason,
-                          wall)
+                          runs * per_run, granules, result.metrics.angle_copies, released, result.metrics.model,
+                          result.metrics.model_reason, wall)
 
 
 @dataclass(frozen=True)
@@ -91,7 +92,8 @@ class Reference:
             "model": self.pooled.model,
             "model_reason": self.pooled.model_reason,
             "granules": self.pooled.granules,
-            "landed_granules": int(self.pooled.x_m.size),
+            "landed_granules": int(round(self.pooled.x_m.size / self.pooled.angle_copies)),
+            "angle_copies": self.pooled.angle_copies,
             "replicates": self.pooled.replicates,
             "target_swath_m": p.target_swath_m,
             "driving": p.driving,

@@ -203,22 +203,25 @@ def intercepted(throws: list[Throw], parts: list[Disc], mirror: bool) -> np.ndar
             marks.append(marks[0])
             continue
         launch = throw.launch
-        reach = other.scene.spinner.radius_m + throw.granules.radius_m
-        marks.append(launch.departed & _ray_meets_circle(launch.position_m, launch.velocity_m_s,
-                                                          np.asarray(other.centre_m), reach))
+        marks.append(launch.departed & onto_disc(launch.position_m, launch.velocity_m_s, throw.granules.radius_m,
+                                                 other))
     return np.concatenate(marks)
 
 
-def interception_notes(throws: list[Throw], parts: list[Disc], marks: np.ndarray) -> list[str]:
-    """One note per disc that throws mass onto the other disc (`marks` from `intercepted`)."""
-    if len(parts) < 2:
-        return []
+def onto_disc(position_m: np.ndarray, velocity_m_s: np.ndarray, granule_radius_m: np.ndarray,
+              disc: Disc) -> np.ndarray:
+    """Whether granules launched at `position_m` with plan-view `velocity_m_s` (machine
+    frame) pass within `disc`'s radius plus their own."""
+    reach = disc.scene.spinner.radius_m + granule_radius_m
+    return _ray_meets_circle(position_m, velocity_m_s, np.asarray(disc.centre_m), reach)
+
+
+def interception_notes(throws: list[Throw], parts: list[Disc], lost_kg: list[float]) -> list[str]:
+    """One note per disc that throws mass onto the other disc (`lost_kg` per disc)."""
     notes = []
-    counts = [t.granules.count for t in throws]
-    for i, (throw, other, mine) in enumerate(zip(throws, parts[::-1], np.split(marks, np.cumsum(counts)[:-1]))):
-        mass = throw.granules.mass_kg
-        if mine.any():
-            share = 100.0 * mass[mine].sum() / mass.sum()
+    for i, (throw, other, lost) in enumerate(zip(throws, parts[::-1], lost_kg)):
+        if len(parts) > 1 and lost > 0.0:
+            share = 100.0 * lost / throw.granules.mass_kg.sum()
             notes.append(f"{share:.2g} % of the mass of disc {i + 1} flies onto the other disc (axis at x = "
                          f"{other.centre_m[0]:g} m): taken out of the pattern as intercepted, since what that "
                          f"disc's vanes would do with it is not modelled")

@@ -1,0 +1,155 @@
+"""Release-angle copies: each spinner run reused at several release angles, exactly.
+
+Why it is exact. The disc is axisymmetric and the spinner's phase at release is uniform
+and independent of everything else, so what happens on the disc depends only on the
+release radius r, the release angle relative to the vanes psi = theta - phase, and the
+granule. Turning a granule's release point and phase by the same angle s turns its
+whole path, and its departure state, by s. So one spinner run gives the departure of
+the granule released at (r, theta + s, phase + s) for any s, for the price of a rotation.
+
+The release point is the feed point (r0, theta0) plus an isotropic normal offset of
+s.d. sigma per axis. Its density in polar coordinates about the axis is proportional to
+exp(-(r^2 + r0^2 - 2 r r0 cos(theta - theta0)) / (2 sigma^2)), so given r the release
+angle is von Mises(theta0, kappa = r r0 / sigma^2). Copy k of a granule takes a fresh
+angle theta'_k from that law (copy 0 is the granule itself) and the shift
+s_k = theta'_k - theta; the phase shifts by s_k too, so psi stays and phase'_k is again
+uniform and independent. Every copy is therefore a draw from the granule distribution
+itself, and the mean over copies is an unbiased estimate; copies of one granule share
+(r, psi, size) and are dependent, but they stay in the granule's replicate, so the
+replicates remain independent and the CV's bias correction and standard error
+(`spread.estimate`) hold unchanged. A granule whose release point was pulled back
+inside the vanes (the clip of `sample_granules`) is not von Mises in angle; its copies
+keep its own angle (s = 0), which is still exact.
+
+Each copy carries 1/K of its granule's mass. The angles of replicate r come from a
+generator seeded by (seed, r, COPY_STREAM) alone, so pooled runs stay the one long run.
+
+The copies cost no spinner run and no flight: without wind or forward speed the flight
+is rotation-equivariant about the disc's axis (drag, gravity and the Magnus lift about
+the vertical axis turn with the granule), so a copy lands where its granule lands,
+turned by s. What they cost is a von Mises draw, a rotation and a tray bin each.
+
+When they apply (`copies_for`): plates break the symmetry (a turned granule meets them
+elsewhere and would need its own plate run, which costs as much as the spinner), so does
+a flight with a direction (wind or forward speed: every copy would have to fly), and a
+feed without spread has a single release angle. There the count is 1 and the run is the
+plain one, bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from spreadgym.config.scene import Flight, Scene
+from spreadgym.spread.estimate import TraySample
+from spreadgym.spread.twin import Disc, Throw, onto_disc
+from spreadgym.physics.granules import RELEASE_CLIP_SHARE, GranuleBatch
+
+COPY_STREAM = 1
+"""Third word of the seed of the copies' angles (the sampler's uniforms use (seed, r))."""
+
+
+def copies_for(scene: Scene) -> tuple[int, str]:
+    """How many release angles each simulated granule takes in `scene`, and why."""
+    asked = int(scene.sim.angle_copies)
+    if asked == 1:
+        return 1, "sim.angle_copies = 1"
+    if scene.deflectors:
+        return 1, "plates break the disc's rotational symmetry: one release angle per granule"
+    if not flight_is_equivariant(scene.flight):
+        return 1, "wind or forward speed gives the flight a direction: one release angle per granule"
+    if scene.feed.spread_m == 0.0 or scene.feed.radius_m == 0.0:
+        return 1, "the feed has a single release angle (no spread or on the axis): nothing to copy"
+    return asked, "no plates, a feed spot and a flight without direction: the copies are exact"
+
+
+def flight_is_equivariant(flight: Flight) -> bool:
+    """Whether the flight turns with the launch state about the disc's axis (no wind, no forward speed)."""
+    return flight.forward_speed_m_s == 0.0 and tuple(flight.wind_m_s) == (0.0, 0.0)
+
+
+def angle_shifts(granules: GranuleBatch, scene: Scene, copies: int, seed: int, first_replicate: int) -> np.ndarray:
+    """(copies, N) shifts of the release angle (rad); row 0 is zero (the granule itself).
+
+    The other angles come in antithetic pairs theta0 + phi, theta0 - phi (the law is
+    symmetric about the feed angle, so each is still a von Mises draw; the pair halves
+    the draws and cancels the odd part of the noise). `granules` holds the replicates
+    first_replicate, first_replicate + 1, ... in order, `granules.replicate` 0, 1, ..."""
+    n = granules.count
+    shifts = np.zeros((copies, n))
+    if copies == 1:
+        return shifts
+    feed = scene.feed
+    xy = granules.release_xy_m
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    theta = np.arctan2(xy[:, 1], xy[:, 0])
+    kappa = r * feed.radius_m / feed.spread_m**2
+    free = r < RELEASE_CLIP_SHARE * scene.vane_outer_radius_m * (1.0 - 1e-12)  # not pulled back by the clip
+    pairs = copies // 2  # copies - 1 others: `pairs` pairs, less one if copies is even
+    for replicate in np.unique(granules.replicate):
+        rows = np.flatnonzero(granules.replicate == replicate)
+        rng = np.random.default_rng([seed, first_replicate + int(replicate), COPY_STREAM])
+        phi = rng.vonmises(0.0, np.broadcast_to(kappa[rows], (pairs, rows.size)))
+        others = np.concatenate([phi, -phi])[:copies - 1]
+        shifts[1:, rows] = np.where(free[rows], feed.angle_rad + others - theta[rows], 0.0)
+    return shifts
+
+
+class Turn:
+    """The rotations of K copies of N granules, copy-major (cosines and sines computed once)."""
+
+    def __init__(self, shifts: np.ndarray) -> None:
+        """`shifts` (K, N) in rad, as `angle_shifts` gives them."""
+        self.copies = shifts.shape[0]
+        flat = shifts.ravel()
+        self.cos, self.sin = np.cos(flat), np.sin(flat)
+
+    def mirrored(self) -> "Turn":
+        """The turns of the mirror-image granules (x -> -x): every angle negated."""
+        image = object.__new__(Turn)
+        image.copies, image.cos, image.sin = self.copies, self.cos, -self.sin
+        return image
+
+    def tiled(self, a: np.ndarray) -> np.ndarray:
+        """(K N, ...): the per-granule array `a` (N, ...) for every copy."""
+        return np.tile(a, (self.copies,) + (1,) * (a.ndim - 1))
+
+    def x(self, xy: np.ndarray) -> np.ndarray:
+        """(K N,): the x component of the N vectors (N, 2) turned for every copy."""
+        return self.cos * self.tiled(xy[:, 0]) - self.sin * self.tiled(xy[:, 1])
+
+    def vectors(self, xy: np.ndarray) -> np.ndarray:
+        """(K N, 2): the N vectors (N, 2) turned for every copy."""
+        x, y = self.tiled(xy[:, 0]), self.tiled(xy[:, 1])
+        return np.column_stack([self.cos * x - self.sin * y, self.sin * x + self.cos * y])
+
+
+def copied_sample(throws: list[Throw], landings_m: list[np.ndarray], turns: list[Turn], parts: list[Disc],
+                  mirror: bool) -> tuple[TraySample, list[float]]:
+    """The tray sample of every disc's copies, and each disc's mass thrown onto the other disc (kg).
+
+    `throws`, `landings_m` (N, 2; NaN for granules that did not depart) are in each disc's
+    frame, its axis at the origin; the flight turns with the copies (`flight_is_equivariant`).
+    A copy whose turned launch ray meets the other disc is intercepted, as
+    `twin.intercepted` marks granules; with `mirror`, the second disc takes the first's marks."""
+    xs, masses, replicates, lost_kg = [], [], [], []
+    first_marks = None
+    for i, (throw, landed_at, turn, disc) in enumerate(zip(throws, landings_m, turns, parts)):
+        g, launch = throw.granules, throw.launch
+        gone = turn.tiled(launch.departed)
+        if len(parts) == 1:
+            lost = np.zeros_like(gone)
+        elif mirror and i == 1:
+            lost = first_marks
+        else:
+            centre = np.asarray(disc.centre_m)
+            lost = gone & onto_disc(turn.vectors(launch.position_m) + centre, turn.vectors(launch.velocity_m_s),
+                                    turn.tiled(g.radius_m), parts[1 - i])
+            first_marks = lost
+        kept = gone & ~lost
+        mass = turn.tiled(g.mass_kg) / turn.copies
+        xs.append(turn.x(landed_at)[kept] + disc.centre_m[0])
+        masses.append(mass[kept])
+        replicates.append(turn.tiled(g.replicate)[kept])
+        lost_kg.append(float(mass[lost].sum()))
+    return TraySample(np.concatenate(xs), np.concatenate(masses), np.concatenate(replicates)), lost_kg
