@@ -139,7 +139,8 @@ class DesignConfig(StrictModel):
     scene: str = Field(default="paper", description="shipped scene name or YAML path")
     scene_overrides: dict[str, Any] = Field(default_factory=dict, description="dotted scene keys")
     model: str = Field(default="auto", description="spinner model (see spreadgym.physics.selection)")
-    granules: Integer = Field(default=2000, ge=1, le=1_000_000, description="granules per simulation")
+    granules: Integer = Field(default=2048, ge=1, le=1_000_000,
+                       description="granules simulated per step, each at sim.angle_copies release angles")
     confidence_interval: bool = Field(default=False, description="the CV's 95 % t interval in info[\"metrics\"]")
     fallback_restitution: FallbackRestitution = FallbackRestitution()
     context: ContextConfig

@@ -201,10 +201,11 @@ class Sim(StrictModel):
     replicates: Integer = Field(default=8, ge=1, le=4096,
                             description="independent replicates per run (the CV's bias correction and "
                                         "standard error rest on them); the most that divide sim.granules")
-    angle_copies: Integer = Field(default=1, ge=1, le=256,
+    angle_copies: Integer = Field(default=32, ge=1, le=256,
                               description="release angles per simulated granule: each spinner run is reused "
                                           "at this many release angles drawn from the feed spot, exactly "
-                                          "(docs/estimate.md); 1 for none; plates and a point feed take 1")
+                                          "(docs/estimate.md); 1 for none; plates, wind, forward speed and a point "
+                                          "feed take 1")
 
 
 class TwinSpinner(StrictModel):

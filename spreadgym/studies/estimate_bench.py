@@ -2,8 +2,9 @@
 
 Two benchmarks:
 * `cv_noise_rows`: on one scene and model, the CV of single runs against the converged
-  CV of the same model, for plain Monte Carlo and the QMC sampler, each scored by the
-  plain tray CV and by the bias-corrected estimate, across granule counts.
+  CV of the same model, for plain Monte Carlo, the QMC sampler, and the QMC sampler with
+  release-angle copies (the default), each scored by the plain tray CV and by the
+  bias-corrected estimate, across granule counts.
 * `target_rows`: the default evaluation (default granule count and sampler) on every
   reference scene against its stored converged reference: the estimate's bias, its
   spread over seeds, how often the effective swath equals the converged one, the wall time.
@@ -23,10 +24,16 @@ from spreadgym.spread.reference import pool_runs, reference_from
 from spreadgym.studies.references import load_references, reference_family
 
 NOISE_COUNTS = (512, 1024, 2048, 4096, 8192)
-SAMPLERS = ("mc", "qmc")
+SAMPLERS = {  # how a run draws its sample: scene keys
+    "mc": {"sim.sampler": "mc", "sim.angle_copies": 1},
+    "qmc": {"sim.sampler": "qmc", "sim.angle_copies": 1},
+    "qmc+copies": {"sim.sampler": "qmc", "sim.angle_copies": 32},
+}
+SAMPLER_LABELS = {"mc": "plain Monte Carlo", "qmc": "scrambled Sobol",
+                  "qmc+copies": "scrambled Sobol, 32 release angles"}
 
 
-def cv_noise_rows(scene_name: str = "paper", model: str = "analytic", counts=NOISE_COUNTS, seeds: int = 16,
+def cv_noise_rows(scene_name: str = "paper", model: str = "compiled", counts=NOISE_COUNTS, seeds: int = 16,
                   reference_runs: int = 64, overrides: Optional[dict] = None) -> list[dict]:
     """Bias and s.d. over seeds of the plain and the corrected CV, per sampler and granule count."""
     base = dict(overrides or {})
@@ -34,11 +41,11 @@ def cv_noise_rows(scene_name: str = "paper", model: str = "analytic", counts=NOI
                                pool_runs(load_scene(scene_name, {**base, "sim.seed": 10_000}), reference_runs,
                                          model=model)).at_target
     rows = []
-    for sampler in SAMPLERS:
+    for sampler, keys in SAMPLERS.items():
         for n in counts:
             raw, corrected, walls = [], [], []
             for seed in range(seeds):
-                scene = load_scene(scene_name, {**base, "sim.granules": n, "sim.seed": seed, "sim.sampler": sampler})
+                scene = load_scene(scene_name, {**base, "sim.granules": n, "sim.seed": seed, **keys})
                 m = run_scene(scene, model=model).metrics
                 raw.append(m.cv_raw_percent)
                 corrected.append(m.cv_percent_at_target)
@@ -62,11 +69,12 @@ def plot_cv_noise(rows: list[dict], path) -> None:
     fig = Figure(figsize=(11, 4.2), dpi=100)
     ax_bias, ax_sd = fig.subplots(1, 2)
     styles = {("mc", "plain"): ("tab:red", "o--"), ("mc", "corrected"): ("tab:red", "o-"),
-              ("qmc", "plain"): ("tab:blue", "s--"), ("qmc", "corrected"): ("tab:blue", "s-")}
+              ("qmc", "plain"): ("tab:blue", "s--"), ("qmc", "corrected"): ("tab:blue", "s-"),
+              ("qmc+copies", "plain"): ("tab:green", "^--"), ("qmc+copies", "corrected"): ("tab:green", "^-")}
     for (sampler, estimator), (colour, style) in styles.items():
         data = [r for r in rows if r["sampler"] == sampler and r["estimator"] == estimator]
         n = [r["granules"] for r in data]
-        label = f"{'plain Monte Carlo' if sampler == 'mc' else 'scrambled Sobol'}, {estimator} CV"
+        label = f"{SAMPLER_LABELS[sampler]}, {estimator} CV"
         ax_bias.errorbar(n, [r["bias_pp"] for r in data], yerr=[2 * r["bias_se_pp"] for r in data], fmt=style,
                          color=colour, label=label, capsize=3)
         ax_sd.plot(n, [r["sd_pp"] for r in data], style, color=colour, label=label)

@@ -168,7 +168,7 @@ def test_granules_thrown_onto_the_other_disc_are_taken_out_of_the_pattern():
     v = np.array([[-1.0, 0.0], [1.0, 0.0], [-1.0, 1.0]])
     meets = twin._ray_meets_circle(p, v, np.array([-0.4, 0.0]), np.full(3, 0.3))
     assert meets.tolist() == [True, False, False]
-    r = run_scene(_scene({"feed.angle_deg": 100.0}), model="analytic")  # ~5 % thrown inwards
+    r = run_scene(_scene({"feed.angle_deg": 100.0, "sim.angle_copies": 1}), model="analytic")  # ~5 % inwards
     notes = [n for n in r.metrics.notes if "flies onto the other disc" in n]
     assert len(notes) == 2
     # the marks, found again from the machine-frame launches of each disc on its own
@@ -202,13 +202,16 @@ def test_every_model_runs_twin_field(model):
 
 @pytest.mark.slow
 def test_compiled_meets_the_full_model_on_twin_field():
-    """Converged references of both models: CV at the target and along the curve."""
+    """Pooled runs of both models: CV at the target, the effective swath, and the curve up
+    to the swath (the part that decides it; beyond it, at CVs of 20-40 %, the compiled
+    model runs up to ~1 pp above the full one on this scene: docs/fidelity.md)."""
     scene = _scene(granules=2048)
     refs = {m: reference_from(scene, pool_runs(scene, 3, model=m)) for m in ("compiled", "pymunk")}
     fast, full = refs["compiled"], refs["pymunk"]
     se = np.hypot(fast.at_target.standard_error_percent, full.at_target.standard_error_percent)
     assert abs(fast.at_target.cv_percent - full.at_target.cv_percent) <= max(0.5, 2.0 * se)
-    common = min(fast.widths_m.size, full.widths_m.size)
+    assert fast.effective_swath_interval_m[0] <= full.effective_swath_m <= fast.effective_swath_interval_m[1]
+    common = int(np.searchsorted(full.widths_m, full.effective_swath_m, side="right"))
     sel = slice(0, common)
     diff = np.abs(fast.cv_percent[sel] - full.cv_percent[sel])
     band = np.maximum(0.5, 2.0 * np.hypot(fast.cv_standard_error_percent[sel], full.cv_standard_error_percent[sel]))
