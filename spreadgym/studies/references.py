@@ -19,7 +19,7 @@ from spreadgym.report import format_table, print_json
 from spreadgym.spread.reference import pool_runs, reference_from
 
 FAMILY_FILE = "references.yaml"
-DEFAULT_RUNS = 32  # x 4096 granules = 131 072 pooled
+DEFAULT_RUNS = 32  # x 2048 granules x 32 release angles (the default run) = 65 536 simulated
 
 
 def reference_family(overrides: Optional[dict] = None) -> dict[str, Scene]:
