@@ -80,7 +80,7 @@ def run_scene(
     for disc in parts:
         if throws and twin.is_mirror_image(parts[0].scene, disc.scene):
             throws.append(twin.mirrored(throws[0]))
-            turns.append(turns[0].mirrored())
+            turns.append(turns[0])  # its copies are the first disc's mirrored (rotations.copied_sample)
             mirror = True
             continue
         granules = sample_granules(disc.scene, fertilizer, scene.sim.replicates, first_replicate)

@@ -42,7 +42,7 @@ import numpy as np
 
 from spreadgym.config.scene import Flight, Scene
 from spreadgym.spread.estimate import TraySample
-from spreadgym.spread.twin import Disc, Throw, onto_disc
+from spreadgym.spread.twin import Disc, Throw, onto_disc_axis
 from spreadgym.physics.granules import RELEASE_CLIP_SHARE, GranuleBatch
 
 COPY_STREAM = 1
@@ -104,25 +104,6 @@ class Turn:
         flat = shifts.ravel()
         self.cos, self.sin = np.cos(flat), np.sin(flat)
 
-    def mirrored(self) -> "Turn":
-        """The turns of the mirror-image granules (x -> -x): every angle negated."""
-        image = object.__new__(Turn)
-        image.copies, image.cos, image.sin = self.copies, self.cos, -self.sin
-        return image
-
-    def tiled(self, a: np.ndarray) -> np.ndarray:
-        """(K N, ...): the per-granule array `a` (N, ...) for every copy."""
-        return np.tile(a, (self.copies,) + (1,) * (a.ndim - 1))
-
-    def x(self, xy: np.ndarray) -> np.ndarray:
-        """(K N,): the x component of the N vectors (N, 2) turned for every copy."""
-        return self.cos * self.tiled(xy[:, 0]) - self.sin * self.tiled(xy[:, 1])
-
-    def vectors(self, xy: np.ndarray) -> np.ndarray:
-        """(K N, 2): the N vectors (N, 2) turned for every copy."""
-        x, y = self.tiled(xy[:, 0]), self.tiled(xy[:, 1])
-        return np.column_stack([self.cos * x - self.sin * y, self.sin * x + self.cos * y])
-
 
 def copied_sample(throws: list[Throw], landings_m: list[np.ndarray], turns: list[Turn], parts: list[Disc],
                   mirror: bool) -> tuple[TraySample, list[float]]:
@@ -131,25 +112,40 @@ def copied_sample(throws: list[Throw], landings_m: list[np.ndarray], turns: list
     `throws`, `landings_m` (N, 2; NaN for granules that did not depart) are in each disc's
     frame, its axis at the origin; the flight turns with the copies (`flight_is_equivariant`).
     A copy whose turned launch ray meets the other disc is intercepted, as
-    `twin.intercepted` marks granules; with `mirror`, the second disc takes the first's marks."""
+    `twin.intercepted` marks granules: the granule's own ray is tested against the other
+    disc's axis turned back by the copy's angle (the same geometry, turned as a whole).
+    With `mirror`, the second disc takes the first's marks."""
     xs, masses, replicates, lost_kg = [], [], [], []
-    first_marks = None
+    local_x = None  # the first disc's copies across the track, its own frame
     for i, (throw, landed_at, turn, disc) in enumerate(zip(throws, landings_m, turns, parts)):
+        if mirror and i == 1:  # the first disc's copies mirrored: x -> -x, same masses and marks
+            xs.append(disc.centre_m[0] - local_x)
+            masses.append(masses[0])
+            replicates.append(replicates[0])
+            lost_kg.append(lost_kg[0])
+            continue
         g, launch = throw.granules, throw.launch
-        gone = turn.tiled(launch.departed)
-        if len(parts) == 1:
-            lost = np.zeros_like(gone)
-        elif mirror and i == 1:
-            lost = first_marks
+        if launch.departed.all():  # the usual case: whole tiles, no gather
+            def of_copies(a):
+                return np.tile(a, (turn.copies,) + (1,) * (a.ndim - 1))
+            c, s = turn.cos, turn.sin
         else:
-            centre = np.asarray(disc.centre_m)
-            lost = gone & onto_disc(turn.vectors(launch.position_m) + centre, turn.vectors(launch.velocity_m_s),
-                                    turn.tiled(g.radius_m), parts[1 - i])
-            first_marks = lost
-        kept = gone & ~lost
-        mass = turn.tiled(g.mass_kg) / turn.copies
-        xs.append(turn.x(landed_at)[kept] + disc.centre_m[0])
+            row = np.flatnonzero(np.tile(launch.departed, turn.copies))  # departed copies, copy-major
+
+            def of_copies(a):
+                return a[row % g.count]
+            c, s = turn.cos[row], turn.sin[row]
+        if len(parts) == 1:
+            kept = np.ones(c.size, dtype=bool)
+        else:
+            other = np.subtract(parts[1 - i].centre_m, disc.centre_m)  # the other axis, this disc's frame
+            axis = np.column_stack([c * other[0] + s * other[1], c * other[1] - s * other[0]])
+            kept = ~onto_disc_axis(of_copies(launch.position_m), of_copies(launch.velocity_m_s),
+                                   of_copies(g.radius_m), axis, parts[1 - i].scene.spinner.radius_m)
+        mass = of_copies(g.mass_kg) / turn.copies
+        local_x = (c * of_copies(landed_at[:, 0]) - s * of_copies(landed_at[:, 1]))[kept]
+        xs.append(local_x + disc.centre_m[0])
         masses.append(mass[kept])
-        replicates.append(turn.tiled(g.replicate)[kept])
-        lost_kg.append(float(mass[lost].sum()))
+        replicates.append(of_copies(g.replicate)[kept])
+        lost_kg.append(float(mass[~kept].sum()))
     return TraySample(np.concatenate(xs), np.concatenate(masses), np.concatenate(replicates)), lost_kg

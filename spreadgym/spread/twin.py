@@ -203,17 +203,17 @@ def intercepted(throws: list[Throw], parts: list[Disc], mirror: bool) -> np.ndar
             marks.append(marks[0])
             continue
         launch = throw.launch
-        marks.append(launch.departed & onto_disc(launch.position_m, launch.velocity_m_s, throw.granules.radius_m,
-                                                 other))
+        reach = other.scene.spinner.radius_m + throw.granules.radius_m
+        marks.append(launch.departed & _ray_meets_circle(launch.position_m, launch.velocity_m_s,
+                                                          np.asarray(other.centre_m), reach))
     return np.concatenate(marks)
 
 
-def onto_disc(position_m: np.ndarray, velocity_m_s: np.ndarray, granule_radius_m: np.ndarray,
-              disc: Disc) -> np.ndarray:
-    """Whether granules launched at `position_m` with plan-view `velocity_m_s` (machine
-    frame) pass within `disc`'s radius plus their own."""
-    reach = disc.scene.spinner.radius_m + granule_radius_m
-    return _ray_meets_circle(position_m, velocity_m_s, np.asarray(disc.centre_m), reach)
+def onto_disc_axis(position_m: np.ndarray, velocity_m_s: np.ndarray, granule_radius_m: np.ndarray,
+                   axis_m: np.ndarray, disc_radius_m: float) -> np.ndarray:
+    """Whether granules launched at `position_m` with plan-view `velocity_m_s` pass within
+    `disc_radius_m` plus their own radius of a disc axis at `axis_m` ((2,) or one per granule)."""
+    return _ray_meets_circle(position_m, velocity_m_s, axis_m, disc_radius_m + granule_radius_m)
 
 
 def interception_notes(throws: list[Throw], parts: list[Disc], lost_kg: list[float]) -> list[str]:
@@ -229,9 +229,10 @@ def interception_notes(throws: list[Throw], parts: list[Disc], lost_kg: list[flo
 
 
 def _ray_meets_circle(p: np.ndarray, v: np.ndarray, centre: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """Whether the rays p + t v (t >= 0) pass within `radius` of `centre` (plan view)."""
-    rel = centre - p
-    speed2 = np.maximum(np.sum(v * v, axis=1), 1e-300)
-    t = np.maximum(np.sum(rel * v, axis=1) / speed2, 0.0)
-    nearest = rel - t[:, None] * v
-    return np.sum(nearest * nearest, axis=1) < radius * radius
+    """Whether the rays p + t v (t >= 0) pass within `radius` of `centre` ((2,) or (N, 2)), plan view."""
+    centre = np.asarray(centre, dtype=float)
+    rx, ry = centre[..., 0] - p[:, 0], centre[..., 1] - p[:, 1]
+    vx, vy = v[:, 0], v[:, 1]
+    t = np.maximum((rx * vx + ry * vy) / np.maximum(vx * vx + vy * vy, 1e-300), 0.0)
+    nx, ny = rx - t * vx, ry - t * vy
+    return nx * nx + ny * ny < radius * radius

@@ -51,7 +51,7 @@ def test_copies_draw_that_law_and_keep_the_release_radius():
     g = sampled(scene)
     shifts = rotations.angle_shifts(g, scene, 16, seed=5, first_replicate=0)
     assert np.array_equal(shifts[0], np.zeros(g.count))
-    r, angle = polar(scene, rotations.Turn(shifts).vectors(g.release_xy_m))
+    r, angle = polar(scene, rotate(np.tile(g.release_xy_m, (16, 1)), shifts.ravel()))
     np.testing.assert_allclose(r, np.tile(np.hypot(*g.release_xy_m.T), 16), rtol=1e-12)
     free = r[g.count:] < 0.95 * scene.vane_outer_radius_m * (1 - 1e-12)
     kappa = r[g.count:][free] * scene.feed.radius_m / scene.feed.spread_m**2
@@ -84,7 +84,7 @@ def test_copy_count_follows_the_scene(settings, copies, why):
     assert count == 1 and "plates" in reason
 
 
-@pytest.mark.parametrize("settings", [{}, {"flight.magnus": True}])
+@pytest.mark.parametrize("settings", [{}, {"flight.magnus": True}, {"spinner.rpm": 100.0}])  # last: some retained
 def test_copies_land_where_flying_each_turned_copy_lands(settings):
     scene = paper(**{"sim.granules": 512, "sim.angle_copies": 4, "sim.seed": 9, **settings})
     result = run_scene(scene, model="analytic")
@@ -93,6 +93,7 @@ def test_copies_land_where_flying_each_turned_copy_lands(settings):
     shifts = rotations.angle_shifts(g, scene, 4, scene.sim.seed, 0).ravel()
     launch = result.launch
     gone = np.tile(launch.departed, 4)
+    assert settings.get("spinner.rpm") is None or not launch.departed.all()
 
     def copies(a):
         return np.tile(a, (4,) + (1,) * (a.ndim - 1))[gone]
