@@ -41,9 +41,9 @@ from __future__ import annotations
 import numpy as np
 
 from spreadgym.config.scene import Flight, Scene
+from spreadgym.physics.granules import RELEASE_CLIP_SHARE, GranuleBatch
 from spreadgym.spread.estimate import TraySample
 from spreadgym.spread.twin import Disc, Throw, onto_disc_axis
-from spreadgym.physics.granules import RELEASE_CLIP_SHARE, GranuleBatch
 
 COPY_STREAM = 1
 """Third word of the seed of the copies' angles (the sampler's uniforms use (seed, r))."""
@@ -125,16 +125,12 @@ def copied_sample(throws: list[Throw], landings_m: list[np.ndarray], turns: list
             lost_kg.append(lost_kg[0])
             continue
         g, launch = throw.granules, throw.launch
-        if launch.departed.all():  # the usual case: whole tiles, no gather
-            def of_copies(a):
-                return np.tile(a, (turn.copies,) + (1,) * (a.ndim - 1))
-            c, s = turn.cos, turn.sin
-        else:
-            row = np.flatnonzero(np.tile(launch.departed, turn.copies))  # departed copies, copy-major
+        row = None if launch.departed.all() else np.flatnonzero(np.tile(launch.departed, turn.copies))
+        c, s = (turn.cos, turn.sin) if row is None else (turn.cos[row], turn.sin[row])
 
-            def of_copies(a):
-                return a[row % g.count]
-            c, s = turn.cos[row], turn.sin[row]
+        def of_copies(a: np.ndarray, row=row, copies=turn.copies) -> np.ndarray:
+            """Per departed copy, copy-major: whole tiles when every granule departed (the usual case)."""
+            return np.tile(a, (copies,) + (1,) * (a.ndim - 1)) if row is None else a[row % a.shape[0]]
         if len(parts) == 1:
             kept = np.ones(c.size, dtype=bool)
         else:

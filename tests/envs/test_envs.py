@@ -212,7 +212,8 @@ def test_tuning_reward_within_declared_bounds_over_random_actions():
 def _metrics(cv, effective, released, landed, target=4.0):
     """Run metrics with only what the reward reads: the rest is empty or zero."""
     return RunMetrics(
-        model="analytic", model_reason="", dt_s=None, granules=0, angle_copies=1, angle_copies_reason="", outcomes={}, departure={},
+        model="analytic", model_reason="", dt_s=None, granules=0, angle_copies=1, angle_copies_reason="",
+        outcomes={}, departure={},
         target_swath_m=target, driving="racetrack", tray_width_m=0.5, cv_threshold_percent=15.0,
         cv_percent_at_target=cv, cv_standard_error_percent=None, cv_raw_percent=cv, cv_ci_percent=None,
         effective_swath_m=effective, curve_bout_width_m=np.zeros(0), curve_cv_percent=np.zeros(0),

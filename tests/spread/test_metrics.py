@@ -11,7 +11,8 @@ from spreadgym.spread.pipeline import run_scene
 
 def _metrics(released_kg: float, tray_masses_kg: list[float]) -> RunMetrics:
     return RunMetrics(
-        model="analytic", model_reason="", dt_s=None, granules=0, angle_copies=1, angle_copies_reason="", outcomes={}, departure={},
+        model="analytic", model_reason="", dt_s=None, granules=0, angle_copies=1, angle_copies_reason="",
+        outcomes={}, departure={},
         target_swath_m=4.0, driving="racetrack", tray_width_m=0.5, cv_threshold_percent=15.0,
         cv_percent_at_target=None, cv_standard_error_percent=None, cv_raw_percent=None, cv_ci_percent=None,
         effective_swath_m=0.0, curve_bout_width_m=np.zeros(0), curve_cv_percent=np.zeros(0),
@@ -31,7 +32,8 @@ def test_json_holds_the_run_and_its_trays():
     result = run_scene(load_scene("paper", {"sim.granules": 64, "feed.drop_height_m": 0.0,
                                             "contact.vane_restitution": 0.0}), ci=False)
     data = result.metrics.to_json()
-    assert list(data) == ["model", "model_reason", "dt_s", "granules", "angle_copies", "angle_copies_reason", "outcomes", "departure", "target_swath_m",
+    assert list(data) == ["model", "model_reason", "dt_s", "granules", "angle_copies", "angle_copies_reason",
+                          "outcomes", "departure", "target_swath_m",
                           "driving", "tray_width_m", "cv_threshold_percent", "cv_percent_at_target",
                           "cv_standard_error_percent", "cv_raw_percent", "cv_ci_percent", "effective_swath_m",
                           "cv_curve", "trays", "mass", "notes", "wall_s"]
