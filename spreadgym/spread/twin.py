@@ -203,9 +203,8 @@ def intercepted(throws: list[Throw], parts: list[Disc], mirror: bool) -> np.ndar
             marks.append(marks[0])
             continue
         launch = throw.launch
-        reach = other.scene.spinner.radius_m + throw.granules.radius_m
-        marks.append(launch.departed & _ray_meets_circle(launch.position_m, launch.velocity_m_s,
-                                                          np.asarray(other.centre_m), reach))
+        marks.append(launch.departed & onto_disc_axis(launch.position_m, launch.velocity_m_s, throw.granules.radius_m,
+                                                       np.asarray(other.centre_m), other.scene.spinner.radius_m))
     return np.concatenate(marks)
 
 
