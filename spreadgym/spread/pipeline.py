@@ -90,8 +90,7 @@ def run_scene(
         launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
         throws.append(twin.Throw(granules, departure, launch))
         copies, copies_reason = rotations.copies_for(disc.scene)
-        turns.append(rotations.Turn(rotations.angle_shifts(granules, disc.scene, copies, scene.sim.seed,
-                                                           first_replicate)))
+        turns.append(rotations.copy_turns(granules, disc.scene, copies, scene.sim.seed, first_replicate))
     # every disc flies in its own frame; the pattern is in the machine frame
     local = twin.combined(throws)
     placed = [twin.moved(t, d.centre_m) for t, d in zip(throws, parts)]

@@ -42,6 +42,7 @@ import numpy as np
 
 from spreadgym.config.scene import Flight, Scene
 from spreadgym.physics.granules import RELEASE_CLIP_SHARE, GranuleBatch
+from spreadgym.spread import von_mises
 from spreadgym.spread.estimate import TraySample
 from spreadgym.spread.twin import Disc, Throw, onto_disc_axis
 
@@ -68,41 +69,40 @@ def flight_is_equivariant(flight: Flight) -> bool:
     return flight.forward_speed_m_s == 0.0 and tuple(flight.wind_m_s) == (0.0, 0.0)
 
 
-def angle_shifts(granules: GranuleBatch, scene: Scene, copies: int, seed: int, first_replicate: int) -> np.ndarray:
-    """(copies, N) shifts of the release angle (rad); row 0 is zero (the granule itself).
-
-    The other angles come in antithetic pairs theta0 + phi, theta0 - phi (the law is
-    symmetric about the feed angle, so each is still a von Mises draw; the pair halves
-    the draws and cancels the odd part of the noise). `granules` holds the replicates
-    first_replicate, first_replicate + 1, ... in order, `granules.replicate` 0, 1, ..."""
-    n = granules.count
-    shifts = np.zeros((copies, n))
-    if copies == 1:
-        return shifts
-    feed = scene.feed
-    xy = granules.release_xy_m
-    r = np.hypot(xy[:, 0], xy[:, 1])
-    theta = np.arctan2(xy[:, 1], xy[:, 0])
-    kappa = r * feed.radius_m / feed.spread_m**2
-    free = r < RELEASE_CLIP_SHARE * scene.vane_outer_radius_m * (1.0 - 1e-12)  # not pulled back by the clip
-    pairs = copies // 2  # copies - 1 others: `pairs` pairs, less one if copies is even
-    for replicate in np.unique(granules.replicate):
-        rows = np.flatnonzero(granules.replicate == replicate)
-        rng = np.random.default_rng([seed, first_replicate + int(replicate), COPY_STREAM])
-        phi = rng.vonmises(0.0, np.broadcast_to(kappa[rows], (pairs, rows.size)))
-        others = np.concatenate([phi, -phi])[:copies - 1]
-        shifts[1:, rows] = np.where(free[rows], feed.angle_rad + others - theta[rows], 0.0)
-    return shifts
-
-
 class Turn:
-    """The rotations of K copies of N granules, copy-major (cosines and sines computed once)."""
+    """The rotations of K copies of N granules, copy-major, as cosines and sines (K * N,)."""
 
-    def __init__(self, shifts: np.ndarray) -> None:
-        """`shifts` (K, N) in rad, as `angle_shifts` gives them."""
-        self.copies = shifts.shape[0]
-        flat = shifts.ravel()
-        self.cos, self.sin = np.cos(flat), np.sin(flat)
+    def __init__(self, cos: np.ndarray, sin: np.ndarray, copies: int) -> None:
+        self.cos, self.sin, self.copies = cos, sin, copies
+
+
+def copy_turns(granules: GranuleBatch, scene: Scene, copies: int, seed: int, first_replicate: int) -> Turn:
+    """The turns s_k of `copies` copies of every granule; copy 0 is the granule itself (s = 0).
+
+    s_k = theta0 + phi_k - theta, so s_k is von Mises about theta0 - theta; the other
+    angles come in antithetic pairs theta0 +- phi (the law is symmetric about the feed
+    angle, so each is still a von Mises draw; the pair halves the draws and cancels the
+    odd part of the noise). Only cos s and sin s are needed, and
+    `von_mises.antithetic_turns` gives them without forming an angle. `granules` holds the
+    replicates first_replicate, first_replicate + 1, ... in order, `granules.replicate`
+    0, 1, ..."""
+    n = granules.count
+    cos_turn, sin_turn = np.ones((copies, n)), np.zeros((copies, n))
+    if copies > 1:
+        feed = scene.feed
+        xy = granules.release_xy_m
+        r = np.hypot(xy[:, 0], xy[:, 1])
+        to_feed = feed.angle_rad - np.arctan2(xy[:, 1], xy[:, 0])  # the mean of s
+        cos_mu, sin_mu = np.cos(to_feed), np.sin(to_feed)
+        kappa = r * feed.radius_m / feed.spread_m**2
+        for replicate in np.unique(granules.replicate):
+            rows = np.flatnonzero(granules.replicate == replicate)
+            rng = np.random.default_rng([seed, first_replicate + int(replicate), COPY_STREAM])
+            von_mises.antithetic_turns(rng, kappa[rows], cos_mu[rows], sin_mu[rows], rows, cos_turn, sin_turn)
+        # a point pulled back by the clip keeps its angle (s = 0)
+        held = ~(r < RELEASE_CLIP_SHARE * scene.vane_outer_radius_m * (1.0 - 1e-12))
+        cos_turn[:, held], sin_turn[:, held] = 1.0, 0.0
+    return Turn(cos_turn.ravel(), sin_turn.ravel(), copies)
 
 
 def copied_sample(throws: list[Throw], landings_m: list[np.ndarray], turns: list[Turn], parts: list[Disc],

@@ -28,6 +28,13 @@ def mean_resultant(kappa):
     return i1e(kappa) / i0e(kappa)
 
 
+def shifts(g, scene, copies, seed, first_replicate=0):
+    """(copies, N) turns of the copies (rad), from their cosines and sines."""
+    turn = rotations.copy_turns(g, scene, copies, seed, first_replicate)
+    assert turn.copies == copies
+    return np.arctan2(turn.sin, turn.cos).reshape(copies, g.count)
+
+
 def polar(scene, xy):
     f = scene.feed
     return np.hypot(*xy.T), np.arctan2(xy[:, 1], xy[:, 0]) - f.angle_rad
@@ -49,24 +56,26 @@ def test_the_release_angle_given_the_radius_is_von_mises_with_the_derived_concen
 def test_copies_draw_that_law_and_keep_the_release_radius():
     scene = paper(**{"feed.spread_m": 0.03})
     g = sampled(scene)
-    shifts = rotations.angle_shifts(g, scene, 16, seed=5, first_replicate=0)
-    assert np.array_equal(shifts[0], np.zeros(g.count))
-    r, angle = polar(scene, rotate(np.tile(g.release_xy_m, (16, 1)), shifts.ravel()))
+    turns = rotations.copy_turns(g, scene, 16, seed=5, first_replicate=0)
+    assert np.all(turns.cos[:g.count] == 1.0) and np.all(turns.sin[:g.count] == 0.0)  # copy 0: the granule
+    np.testing.assert_allclose(turns.cos**2 + turns.sin**2, 1.0, rtol=0, atol=1e-15)
+    turned = np.arctan2(turns.sin, turns.cos)
+    r, angle = polar(scene, rotate(np.tile(g.release_xy_m, (16, 1)), turned))
     np.testing.assert_allclose(r, np.tile(np.hypot(*g.release_xy_m.T), 16), rtol=1e-12)
     free = r[g.count:] < 0.95 * scene.vane_outer_radius_m * (1 - 1e-12)
     kappa = r[g.count:][free] * scene.feed.radius_m / scene.feed.spread_m**2
     gap = np.cos(angle[g.count:][free]) - mean_resultant(kappa)
     assert abs(gap.mean()) < 4.0 * gap.std() / np.sqrt(gap.size)
     clipped = ~(np.hypot(*g.release_xy_m.T) < 0.95 * scene.vane_outer_radius_m * (1 - 1e-12))
-    assert clipped.any() and np.all(shifts[:, clipped] == 0.0)  # pulled-back points keep their angle
+    assert clipped.any() and np.all(turned.reshape(16, -1)[:, clipped] == 0.0)  # pulled-back points keep their angle
 
 
 def test_copies_of_a_replicate_depend_on_the_seed_and_that_replicate_only():
     scene = paper(**{"sim.seed": 3})
-    one = rotations.angle_shifts(sampled(scene), scene, 4, seed=3, first_replicate=0)
+    one = shifts(sampled(scene), scene, 4, seed=3)
     later = scene_with(scene, {"sim.granules": 2048})
     g = sample_granules(later, LIBRARY.fertilizer(later.fertilizer), 4, first_replicate=4)
-    half = rotations.angle_shifts(g, later, 4, seed=3, first_replicate=4)
+    half = shifts(g, later, 4, seed=3, first_replicate=4)
     assert np.array_equal(one[:, 2048:], half)
 
 
@@ -90,7 +99,7 @@ def test_copies_land_where_flying_each_turned_copy_lands(settings):
     result = run_scene(scene, model="analytic")
     g = sampled(scene)
     assert np.array_equal(g.diameter_m, result.granules.diameter_m)
-    shifts = rotations.angle_shifts(g, scene, 4, scene.sim.seed, 0).ravel()
+    turned = shifts(g, scene, 4, scene.sim.seed).ravel()
     launch = result.launch
     gone = np.tile(launch.departed, 4)
     assert settings.get("spinner.rpm") is None or not launch.departed.all()
@@ -98,9 +107,9 @@ def test_copies_land_where_flying_each_turned_copy_lands(settings):
     def copies(a):
         return np.tile(a, (4,) + (1,) * (a.ndim - 1))[gone]
 
-    flown = flight.fly(rotate(copies(launch.position_m), shifts[gone]),
+    flown = flight.fly(rotate(copies(launch.position_m), turned[gone]),
                        np.maximum(scene.spinner.height_m + copies(launch.height_m), 0.0),
-                       np.column_stack([rotate(copies(launch.velocity_m_s), shifts[gone]),
+                       np.column_stack([rotate(copies(launch.velocity_m_s), turned[gone]),
                                         copies(launch.vertical_velocity_m_s)]),
                        copies(g.diameter_m), g.density_kg_m3, scene.flight, spin_rad_s=copies(launch.spin_rad_s))
     # the adaptive steps differ for a turned launch, each landing within the flight's
@@ -115,13 +124,13 @@ def test_each_copy_thrown_onto_the_other_disc_is_intercepted():
     result = run_scene(scene, model="analytic")
     first = twin.discs(scene)[0]
     g = sample_granules(first.scene, LIBRARY.fertilizer(scene.fertilizer), scene.sim.replicates)
-    shifts = rotations.angle_shifts(g, first.scene, 4, scene.sim.seed, 0).ravel()
+    turned = shifts(g, first.scene, 4, scene.sim.seed).ravel()
     half = result.granules.count // 2
     centre = np.asarray(first.centre_m)
     launch = result.launch
     gone = np.tile(launch.departed[:half], 4)
-    position = rotate(np.tile(launch.position_m[:half] - centre, (4, 1)), shifts) + centre
-    velocity = rotate(np.tile(launch.velocity_m_s[:half], (4, 1)), shifts)
+    position = rotate(np.tile(launch.position_m[:half] - centre, (4, 1)), turned) + centre
+    velocity = rotate(np.tile(launch.velocity_m_s[:half], (4, 1)), turned)
     other = -centre  # the mirror disc's axis
     hit = gone & twin._ray_meets_circle(position, velocity, other, scene.spinner.radius_m + np.tile(g.radius_m, 4))
     mass = result.metrics.to_json()["mass"]
