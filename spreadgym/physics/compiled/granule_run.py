@@ -9,6 +9,11 @@ loop advances it by steps of at most P[STEP], cut at the vertical events
     until its flight would be shorter than the full model's time step; that impact is
     plastic, and on a flat face that the frame's forces press the granule against it
     starts the contact phase;
+  * a granule that comes down onto a vane (released onto it, or falling below the vane
+    tops over it) is pushed off as the full model's overlap correction does it: only
+    the position moves (the velocity in the machine frame is kept), by the overlap less
+    what the granule's own motion away from the vane clears at that correction's rate;
+    an approaching one first has its impact, at the vane's surface point;
   * a disc impact: the Coulomb friction impulse mu_d J_n against the velocity
     relative to the disc (never reversing it), J_n = (1 + e) v at a rebound and v when
     the granule comes to rest;
@@ -39,6 +44,7 @@ from spreadgym.physics.compiled.layout import (
     NX,
     NY,
     OMEGA,
+    OVERLAP_RATE,
     REBOUND_FLIGHT,
     SETTLE_SPEED,
     STEP,
@@ -124,16 +130,52 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
     n_track = track.shape[0]
     stalled, loop = 0, 0
     check_overlap = below  # released onto a vane: pushed off it before anything moves
+    came_down = below  # the overlap to check is one of a granule that came down onto a vane
+    clearing = -1  # a vane the granule came down onto that moves away from it, until it is clear
     for loop in range(MAX_LOOPS):
         if check_overlap:
             check_overlap = False
             k, sd, nx, ny, depth = free_motion.overlap(cx, cy, reach, V)
-            if k >= 0:
+            if k < 0:
+                clearing = -1
+            elif k == clearing:
+                pass  # still clearing the vane it came down onto: no push
+            elif came_down:
+                # Come down onto a vane: as in the full model, the impact (if it approaches)
+                # takes the velocity of the vane's surface point, `depth` deeper than the
+                # granule's: the velocity in this frame at the centre pushed off by `depth`
+                # (-omega z x the shift; the velocity in the machine frame is kept). Then
+                # the push along the contact normal as the full model's overlap correction
+                # makes it, at the rate P[OVERLAP_RATE] (a fraction of the overlap per unit
+                # time), while the granule, moving away from the vane at `away`, clears
+                # the rest itself: the shift is depth - away T, T the time until it is clear.
+                separating = vx * nx + vy * ny > 0.0
+                vx, vy = vx + omega * depth * ny, vy - omega * depth * nx
+                vx, vy, s, stays = _catch(cx + depth * nx, cy + depth * ny, vx, vy, s, nx, ny, radius, P)
+                away = vx * nx + vy * ny
+                shift = depth
+                if away > 0.0 and not stays:
+                    rate = P[OVERLAP_RATE]
+                    shift = depth - away * math.log1p(rate * depth / away) / rate
+                    if separating:
+                        clearing = k
+                back = depth - shift
+                vx, vy = vx - omega * back * ny, vy + omega * back * nx
+                cx, cy = cx + shift * nx, cy + shift * ny
+                entering = stays and sd != 0.0
+                if entering:
+                    vane, side = k, sd
+            elif k >= 0:
+                # pressed into a vane after a step (a rounded end): pushed off, then the
+                # impact; only the position is corrected (velocity in the machine frame kept,
+                # so the velocity in this turning frame changes by -omega z x the shift)
                 cx, cy = cx + depth * nx, cy + depth * ny
+                vx, vy = vx + omega * depth * ny, vy - omega * depth * nx
                 vx, vy, s, stays = _catch(cx, cy, vx, vy, s, nx, ny, radius, P)
                 entering = stays and sd != 0.0
                 if entering:
                     vane, side = k, sd
+            came_down = False
         if entering:
             on_face, entering = True, False
             frame = face_motion.face_frame(vane, side, reach, V)
@@ -217,6 +259,7 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
                 vx, vy = disc_drag_impulse(vx, vy, P[MU_DISC] * j)
         elif full and vertical == vertical_events.VANE_TOP_CROSSING:
             below = not below
+            came_down = below
             if not below:
                 on_face = False
         if not on_face and below and event == free_motion.NONE:

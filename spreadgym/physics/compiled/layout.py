@@ -16,6 +16,7 @@ from spreadgym.physics.compiled.kernel_cache import drop_stale_caches
 from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.contacts import Contacts
 from spreadgym.physics.geometry import vane_segments
+from spreadgym.physics.numerics import collision_bias_for
 
 drop_stale_caches()  # before any cached kernel loads: see kernel_cache
 KERNEL = njit(cache=True, error_model="numpy")
@@ -39,7 +40,8 @@ HALF_THICKNESS = 11  # half the vane thickness, m
 INV_KAPPA = 12  # m r^2 / I of a granule: 1/0.4 for a free sphere, 0 for locked rotation
 STUCK_SPEED = 13  # m/s: slower than this (and held by static friction) counts as stuck
 REBOUND_FLIGHT = 14  # s: a rebound off a vane whose flight would be shorter ends the bouncing
-P_SIZE = 15
+OVERLAP_RATE = 15  # 1/s: the full model's overlap correction, (1 - bias**dt) / dt of its pymunk spaces
+P_SIZE = 16
 
 # Columns of V (one row per vane): inner end p, unit vector u along the vane,
 # leading-face normal n (towards the direction of rotation), length of the centre line.
@@ -70,6 +72,7 @@ def pack_parameters(scene: Scene, contacts: Contacts, resolved_s: float, time_li
     p[STEP] = OMEGA_STEP / abs(omega)
     p[SETTLE_SPEED] = 0.5 * GRAVITY_M_S2 * resolved_s
     p[REBOUND_FLIGHT] = resolved_s
+    p[OVERLAP_RATE] = (1.0 - collision_bias_for(resolved_s) ** resolved_s) / resolved_s
     p[TIME_LIMIT] = time_limit_s
     p[HALF_THICKNESS] = 0.5 * scene.vanes.thickness_m
     p[INV_KAPPA] = 0.0 if scene.granule.rotation == "locked" else 1.0 / SPHERE_INERTIA_FACTOR
