@@ -125,5 +125,5 @@ def choose_model(scene: Scene, requested: str = "auto") -> tuple[str, str]:
         return "pymunk", (f"auto: {'; '.join(outside)}, where the fast compiled model has not been checked "
                           "against the full model, so the full model runs")
     return "compiled", ("auto: the compiled model (the full model's contact laws per granule) matches the "
-                        "converged full model within 0.5 pp of CV on 16 of 18 reference scenes (up to 0.56 pp "
-                        "low with vanes pitched forward 25-30 deg; docs/fidelity.md), ~200x cheaper")
+                        "converged full model within 0.5 pp of CV on all 18 reference scenes (within 0.3 pp on 16; "
+                        "twin-field 0.45 pp low; docs/fidelity.md), ~200x cheaper")
