@@ -103,7 +103,8 @@ def run_scene(
     centre = np.repeat(np.asarray([d.centre_m for d in parts]), counts, axis=0)
     # a mirrored throw in a flight without crosswind lands mirrored, to the bit: fly the first disc only
     fly_once = mirror and scene.flight.wind_m_s[0] == 0.0
-    if max(t.copies for t in turns) == 1:
+    copies = max(t.copies for t in turns)  # the most release angles any disc takes
+    if copies == 1:
         landing = _flight(local.launch, granules, flying, disc_height, scene.flight,
                           int(flying[:counts[0]].sum()) if fly_once else None)
         landing = flight_model.Landing(landing.position_m + centre[flying], landing.time_s)
@@ -133,7 +134,7 @@ def run_scene(
         model_reason=reason,
         dt_s=departure.dt_s if departure.dt_s > 0.0 else None,  # None: closed forms, no step
         granules=granules.count,
-        angle_copies=max(t.copies for t in turns),
+        angle_copies=copies,
         angle_copies_reason=copies_reason,
         outcomes=departure.outcome_counts(),
         departure=departure_summary(throws[0].departure, scene.spinner.omega_rad_s),

@@ -41,7 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from spreadgym.config.scene import Flight, Scene
-from spreadgym.physics.granules import RELEASE_CLIP_SHARE, GranuleBatch
+from spreadgym.physics.granules import GranuleBatch, pulled_back_by_clip
 from spreadgym.spread import von_mises
 from spreadgym.spread.estimate import TraySample
 from spreadgym.spread.twin import Disc, Throw, onto_disc_axis
@@ -100,7 +100,7 @@ def copy_turns(granules: GranuleBatch, scene: Scene, copies: int, seed: int, fir
             rng = np.random.default_rng([seed, first_replicate + int(replicate), COPY_STREAM])
             von_mises.antithetic_turns(rng, kappa[rows], cos_mu[rows], sin_mu[rows], rows, cos_turn, sin_turn)
         # a point pulled back by the clip keeps its angle (s = 0)
-        held = ~(r < RELEASE_CLIP_SHARE * scene.vane_outer_radius_m * (1.0 - 1e-12))
+        held = pulled_back_by_clip(xy, scene)
         cos_turn[:, held], sin_turn[:, held] = 1.0, 0.0
     return Turn(cos_turn.ravel(), sin_turn.ravel(), copies)
 
