@@ -15,6 +15,7 @@ METHODS = ("published", "random", "grid", "cmaes", "optuna")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
+    from spreadgym.envs.common.config import DESIGN, load_env_config
 
     parser.add_argument("--model", type=Path, action="append", metavar="DIR/model.zip",
                         help="policy saved by spreadgym train (repeat the flag to compare several)")
@@ -25,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
                         help="scoring episodes per job, each on another granule sample (default 1)")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
-                        help="granules per simulation (default: the env's, 4096)")
+                        help=f"granules per simulation (default: the env's, {load_env_config(DESIGN).granules})")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
     parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
                         help="target swaths (default 2 3 4 5)")

@@ -10,12 +10,15 @@ from spreadgym.cli import arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from spreadgym.envs.common.config import DESIGN, load_env_config
+
     parser.add_argument("--model", type=Path, required=True, metavar="DIR/model.zip",
                         help="policy saved by spreadgym train")
     parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
                         help="episodes per job, each on another granule sample (default 1)")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
-                        help="granules per simulation (default: the env's, 4096, whatever training used)")
+                        help=f"granules per simulation (default: the env's, {load_env_config(DESIGN).granules}, "
+                             "whatever training used)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
     parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
                         help="target swaths (default 2 3 4 5)")
