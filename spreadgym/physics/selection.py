@@ -11,9 +11,9 @@ numba, which costs seconds; listing the models loads none of them). Every runner
 model's contact laws granule by granule (numba), about 200 times faster than `pymunk`
 and as fast as the closed forms. Measured against the converged full model on the
 reference family and the edges of the environments' action ranges (docs/fidelity.md):
-the CV at the target within 0.5 pp on every scene (forward-pitched vanes read ~0.5 pp
-low, inside two standard errors), the effective swath equal on all but one scene (a
-tray off where the CV curve runs along the threshold). So `auto` takes `compiled` for
+the CV at the target within 0.5 pp on every scene (within 0.3 pp on 16 of 18), the
+effective swath equal on all 15 reference scenes, the departure-azimuth histograms
+within a total variation of 0.007. So `auto` takes `compiled` for
 every scene inside the envelope that measurement covers (`VALIDATED`), and the full
 `pymunk` model outside it, saying why.
 
@@ -126,4 +126,5 @@ def choose_model(scene: Scene, requested: str = "auto") -> tuple[str, str]:
                           "against the full model, so the full model runs")
     return "compiled", ("auto: the compiled model (the full model's contact laws per granule) matches the "
                         "converged full model within 0.5 pp of CV on all 18 reference scenes (within 0.3 pp on 16; "
-                        "twin-field 0.45 pp low; docs/fidelity.md), ~200x cheaper")
+                        "twin-field 0.45 pp low) and with the same effective swath on all 15 (docs/fidelity.md), "
+                        "~200x cheaper")
