@@ -29,8 +29,8 @@ demo: $(STAMP)
 
 test: $(STAMP) $(RLSTAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q
-	$(RLVENV)/bin/python -m pytest -q tests/envs/test_rl_tools.py
+	$(BIN)/python -m pytest -q -n auto
+	$(RLVENV)/bin/python -m pytest -q -n auto tests/envs/test_rl_tools.py
 
 bench: $(STAMP)
 	$(BIN)/spreadgym bench
