@@ -57,3 +57,21 @@ def test_null_means_the_default_and_a_config_names_its_algorithm():
     assert validate_config("ppo", {**raw, "normalize": True}, "x").as_yaml()["normalize"] is True
     with pytest.raises(ConfigError, match="^algo: x is a config for 'sac', not for 'ppo'$"):
         validate_config("ppo", {**raw, "algo": "sac"}, "x")
+
+
+def test_zoo_files_hold_the_train_configs_values_for_spinner_design(algo):
+    """The SpinnerDesign entries of the shipped zoo files are `spreadgym train`'s config
+    without the run keys zoo takes from its command line: one set of tuned values."""
+    import yaml
+
+    from spreadgym.envs.zoo import hyperparams_path
+
+    train = read_config(default_config_path(algo))
+    zoo_file = yaml.safe_load(hyperparams_path(algo).read_text(encoding="utf-8"))
+    for env_id in ("spreadgym:SpinnerDesign-v0", "spreadgym/SpinnerDesign-v0"):
+        entry = dict(zoo_file[env_id])
+        kwargs = entry.pop("policy_kwargs", "dict()")
+        assert kwargs.startswith("dict(") and eval(kwargs, {"dict": dict}) == train.get("policy_kwargs", {})
+        assert entry.pop("policy") == train["policy"]
+        run_keys = {"env", "seed", "checkpoint_freq", "max_minutes", "policy_kwargs", "policy"}
+        assert entry == {k: v for k, v in train.items() if k not in run_keys}
