@@ -238,13 +238,14 @@ def test_rllib_trains_one_iteration_with_the_namespaced_id():
         from ray.rllib.algorithms.ppo import PPOConfig
         spreadgym.envs.register_rllib()
         config = (PPOConfig().environment("spreadgym/SpinnerDesign-v0", env_config={"granules": 32})
-                  .env_runners(num_env_runners=1).training(train_batch_size=16, minibatch_size=8, num_epochs=1))
+                  .env_runners(num_env_runners=1, sample_timeout_s=600)  # a loaded CI machine: no empty sample
+                  .training(train_batch_size=16, minibatch_size=8, num_epochs=1))
         algo = config.build_algo()
         result = algo.train()
         print("return", result["env_runners"]["episode_return_mean"])
         algo.stop()
     """)
-    out = run_python(["-c", code], timeout=400)
+    out = run_python(["-c", code], timeout=900)
     assert out.returncode == 0, out.stderr[-3000:]
     value = float(out.stdout.strip().splitlines()[-1].split()[1])
     low, high = gym.make("spreadgym/SpinnerDesign-v0", **SMALL).unwrapped.reward_bounds
