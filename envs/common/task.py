@@ -64,12 +64,19 @@ def to_unit(value: float, lo: float, hi: float) -> float:
     return float(min(1.0, max(-1.0, 2.0 * (value - lo) / (hi - lo) - 1.0)))
 
 
+CONTEXT_SCENES_KEPT = 256
+"""Jobs whose scenes a task keeps (all are dropped when it is full): the shipped contexts are fewer."""
+
+
 class Task:
     """Base scene, context draw and encoding, and one simulated tray test."""
 
     def __init__(self, cfg: DesignConfig):
         self.cfg = cfg
         self.library = load_library()
+        # a job's scene would be rebuilt and re-validated every episode (scenes are immutable);
+        # a plain dict, so the task still pickles and deep-copies
+        self._jobs: dict[Context, tuple[Scene, dict[str, float]]] = {}
         base = load_scene(cfg.scene, cfg.scene_overrides)
         self.base_scene = scene_with(base, {"sim.granules": cfg.granules})
         ctx = cfg.context
@@ -151,6 +158,18 @@ class Task:
 
     def context_scene(self, context: Context) -> Scene:
         """The base scene set up for one job, with the fallback restitution where needed."""
+        return self._job(context)[0]
+
+    def _job(self, context: Context) -> tuple[Scene, dict[str, float]]:
+        """The job's scene and the fallback restitutions it took (dotted keys), kept."""
+        job = self._jobs.get(context)
+        if job is None:
+            if len(self._jobs) >= CONTEXT_SCENES_KEPT:
+                self._jobs.clear()
+            job = self._jobs[context] = self._build_job(context)
+        return job
+
+    def _build_job(self, context: Context) -> tuple[Scene, dict[str, float]]:
         overrides: dict[str, Any] = {
             "fertilizer": context.fertilizer,
             "spinner.material": context.spinner_material,
@@ -160,7 +179,7 @@ class Task:
         }
         scene = scene_with(self.base_scene, overrides)
         extra = self.fallbacks(scene)
-        return scene_with(scene, extra) if extra else scene
+        return (scene_with(scene, extra) if extra else scene), extra
 
     def fallbacks(self, scene: Scene) -> dict[str, float]:
         """Dotted scene keys of the restitutions the library lacks and the scene leaves unset."""
@@ -203,9 +222,7 @@ class Task:
     def context_info(self, context: Context) -> dict:
         """The context as plain data, with the fallback restitutions it needed (dotted keys)."""
         info = context.as_dict()
-        probe = scene_with(self.base_scene, {"fertilizer": context.fertilizer,
-                                             "spinner.material": context.spinner_material})
-        info["fallback_restitution"] = self.fallbacks(probe)
+        info["fallback_restitution"] = dict(self._job(context)[1])  # a copy: the kept one stays
         return info
 
     # -- simulation ------------------------------------------------------------------

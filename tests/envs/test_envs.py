@@ -336,6 +336,23 @@ def test_mixture_gets_the_fallback_restitution_only_where_the_library_lacks_it()
     assert info["context"]["fallback_restitution"] == {}
 
 
+def test_a_kept_job_scene_is_the_one_built_afresh_and_the_env_still_pickles():
+    """The task keeps each job's scene; what it hands out equals a fresh build, a caller
+    changing the info's fallbacks changes nothing kept, and the env pickles (spawned
+    workers and Ray send envs that way)."""
+    import pickle
+
+    env = make(DESIGN_ID, granules=64)
+    _, info = env.reset(seed=0, options={"context": {"fertilizer": "mixture-17-21-17"}})
+    task = env.unwrapped.task
+    context = next(iter(task._jobs))
+    assert task.context_scene(context) == task._build_job(context)[0]
+    info["context"]["fallback_restitution"].clear()
+    assert task.context_info(context)["fallback_restitution"]
+    again = pickle.loads(pickle.dumps(env.unwrapped))
+    assert again.task.context_scene(context) == task.context_scene(context)
+
+
 def test_reset_options_fix_the_job():
     env = make(DESIGN_ID)
     _, info = env.reset(seed=0, options={"context": {"target_swath_m": 5.5, "fertilizer": "pellet"}})
