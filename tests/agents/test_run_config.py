@@ -73,5 +73,5 @@ def test_zoo_files_hold_the_train_configs_values_for_spinner_design(algo):
         kwargs = entry.pop("policy_kwargs", "dict()")
         assert kwargs.startswith("dict(") and eval(kwargs, {"dict": dict}) == train.get("policy_kwargs", {})
         assert entry.pop("policy") == train["policy"]
-        run_keys = {"env", "seed", "checkpoint_freq", "max_minutes", "policy_kwargs", "policy"}
-        assert entry == {k: v for k, v in train.items() if k not in run_keys}
+        run_keys = {"env", "seed", "checkpoint_freq", "max_minutes"}
+        assert entry == {k: v for k, v in train.items() if k not in run_keys | {"policy", "policy_kwargs"}}
