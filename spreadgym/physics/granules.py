@@ -27,6 +27,7 @@ from functools import lru_cache
 from typing import Optional
 
 import numpy as np
+from numba import njit
 from scipy.special import ndtr, ndtri
 from scipy.stats import qmc
 
@@ -108,29 +109,59 @@ def _scrambled_sobol(rngs: list, count: int, dims: int) -> np.ndarray:
     a child of the generator, first the digital shift (dims, bits), then a random lower
     unit-triangular matrix per dimension (left linear matrix scramble: each direction
     number, most significant bit first, is multiplied by it over GF(2)); point i is the
-    shift XOR the scrambled direction numbers picked by the Gray code of i."""
-    bits = np.arange(SOBOL_BITS, dtype=np.uint64)
-    shifts, scrambles = [], []
-    for rng in rngs:
+    shift XOR the scrambled direction numbers picked by the Gray code of i. The draws are
+    numpy's; the bit arithmetic is compiled (`_sobol_points`)."""
+    shifts = np.empty((len(rngs), dims, SOBOL_BITS), dtype=np.uint32)
+    lower = np.empty((len(rngs), dims, SOBOL_BITS, SOBOL_BITS), dtype=np.uint32)
+    for i, rng in enumerate(rngs):
         child = rng.spawn(1)[0]
-        shifts.append(child.integers(0, 2, size=(dims, SOBOL_BITS), dtype=np.uint32).astype(np.uint64)
-                      @ (np.uint64(1) << bits))
-        scrambles.append(np.tril(child.integers(0, 2, size=(dims, SOBOL_BITS, SOBOL_BITS), dtype=np.uint32)))
-    lower = np.stack(scrambles).astype(float)  # (R, dims, p, b)
-    diagonal = np.arange(SOBOL_BITS)
-    lower[:, :, diagonal, diagonal] = 1.0
-    msb_first = np.uint64(SOBOL_BITS - 1) - bits
-    direction = _direction_numbers(dims)  # (dims, j)
-    digits = ((direction[:, None, :] >> msb_first[None, :, None]) & np.uint64(1)).astype(float)  # (dims, b, j)
-    scrambled = (np.rint(lower @ digits).astype(np.uint64) & np.uint64(1)) << msb_first[None, None, :, None]
-    numbers = scrambled.sum(axis=2, dtype=np.uint64)  # (R, dims, j)
-    index = np.arange(1, count, dtype=np.int64)
-    lowest_bit = np.log2(index & -index).astype(np.int64)  # the direction number point i flips
-    points = np.empty((len(rngs), count, dims), dtype=np.uint64)
-    shift = np.stack(shifts)[:, None, :]
-    points[:, :1] = shift
-    points[:, 1:] = np.bitwise_xor.accumulate(numbers[:, :, lowest_bit].transpose(0, 2, 1), axis=1) ^ shift
-    return points * (1.0 / 2**SOBOL_BITS)
+        shifts[i] = child.integers(0, 2, size=(dims, SOBOL_BITS), dtype=np.uint32)
+        lower[i] = child.integers(0, 2, size=(dims, SOBOL_BITS, SOBOL_BITS), dtype=np.uint32)
+    return _sobol_points(shifts, lower, _direction_numbers(dims), count)
+
+
+@njit(cache=True)
+def _sobol_points(shifts, lower, direction, count):
+    """(R, count, dims) points from the shift bits (R, dims, bits; least significant
+    first), the scramble matrices (R, dims, bits, bits; only the strict lower triangle
+    is read, the diagonal is 1) and the direction numbers (dims, bits)."""
+    replicates, dims, bits = shifts.shape
+    points = np.empty((replicates, count, dims))
+    scale = 1.0 / 2.0**bits
+    numbers = np.empty(bits, dtype=np.uint64)
+    masks = np.empty(bits, dtype=np.uint64)
+    for r in range(replicates):
+        for d in range(dims):
+            shift = np.uint64(0)
+            for b in range(bits):
+                if shifts[r, d, b]:
+                    shift |= np.uint64(1) << np.uint64(b)
+            for p in range(bits):  # row p of the matrix as a mask over the digits, placed as they sit in a number
+                row = np.uint64(1) << np.uint64(bits - 1 - p)
+                for b in range(p):
+                    if lower[r, d, p, b]:
+                        row |= np.uint64(1) << np.uint64(bits - 1 - b)
+                masks[p] = row
+            for j in range(bits):
+                scrambled = np.uint64(0)
+                for p in range(bits):  # digit p (most significant first): the parity of row p and the number
+                    x = masks[p] & direction[d, j]
+                    x ^= x >> np.uint64(16)
+                    x ^= x >> np.uint64(8)
+                    x ^= x >> np.uint64(4)
+                    x ^= x >> np.uint64(2)
+                    x ^= x >> np.uint64(1)
+                    scrambled |= (x & np.uint64(1)) << np.uint64(bits - 1 - p)
+                numbers[j] = scrambled
+            point = shift
+            points[r, 0, d] = point * scale
+            for i in range(1, count):
+                lowest = 0
+                while not (i >> lowest) & 1:
+                    lowest += 1
+                point ^= numbers[lowest]
+                points[r, i, d] = point * scale
+    return points
 
 
 @lru_cache(maxsize=None)

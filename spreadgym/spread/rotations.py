@@ -87,21 +87,24 @@ def copy_turns(granules: GranuleBatch, scene: Scene, copies: int, seed: int, fir
     replicates first_replicate, first_replicate + 1, ... in order, `granules.replicate`
     0, 1, ..."""
     n = granules.count
-    cos_turn, sin_turn = np.ones((copies, n)), np.zeros((copies, n))
-    if copies > 1:
-        feed = scene.feed
-        xy = granules.release_xy_m
-        r = np.hypot(xy[:, 0], xy[:, 1])
-        to_feed = feed.angle_rad - np.arctan2(xy[:, 1], xy[:, 0])  # the mean of s
-        cos_mu, sin_mu = np.cos(to_feed), np.sin(to_feed)
-        kappa = r * feed.radius_m / feed.spread_m**2
-        for replicate in np.unique(granules.replicate):
-            rows = np.flatnonzero(granules.replicate == replicate)
-            rng = np.random.default_rng([seed, first_replicate + int(replicate), COPY_STREAM])
-            von_mises.antithetic_turns(rng, kappa[rows], cos_mu[rows], sin_mu[rows], rows, cos_turn, sin_turn)
-        # a point pulled back by the clip keeps its angle (s = 0)
-        held = pulled_back_by_clip(xy, scene)
-        cos_turn[:, held], sin_turn[:, held] = 1.0, 0.0
+    if copies == 1:
+        return Turn(np.ones(n), np.zeros(n), 1)
+    # rows 1.. are filled for every granule below (each is in one replicate); row 0 is s = 0
+    cos_turn, sin_turn = np.empty((copies, n)), np.empty((copies, n))
+    cos_turn[0], sin_turn[0] = 1.0, 0.0
+    feed = scene.feed
+    xy = granules.release_xy_m
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    to_feed = feed.angle_rad - np.arctan2(xy[:, 1], xy[:, 0])  # the mean of s
+    cos_mu, sin_mu = np.cos(to_feed), np.sin(to_feed)
+    kappa = r * feed.radius_m / feed.spread_m**2
+    for replicate in np.unique(granules.replicate):
+        rows = np.flatnonzero(granules.replicate == replicate)
+        rng = np.random.default_rng([seed, first_replicate + int(replicate), COPY_STREAM])
+        von_mises.antithetic_turns(rng, kappa[rows], cos_mu[rows], sin_mu[rows], rows, cos_turn, sin_turn)
+    # a point pulled back by the clip keeps its angle (s = 0)
+    held = pulled_back_by_clip(xy, scene)
+    cos_turn[:, held], sin_turn[:, held] = 1.0, 0.0
     return Turn(cos_turn.ravel(), sin_turn.ravel(), copies)
 
 

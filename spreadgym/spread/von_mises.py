@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 SMALL_KAPPA = 1e-8  # below: the angle is uniform on (-pi, pi) (numpy's limit)
@@ -24,20 +25,28 @@ TAYLOR_KAPPA = 1e-5  # below: the envelope's s from its second-order expansion (
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _draw(rng, k):
-    """(cos phi, sin phi) of one angle phi ~ von Mises(0, k), drawn as numpy draws it."""
+def _envelope(k):
+    """The wrapped-Cauchy envelope's s for concentration k, as numpy computes it (NaN
+    where k is outside (SMALL_KAPPA, LARGE_KAPPA): `_draw` does not use it there)."""
+    if k < SMALL_KAPPA or k > LARGE_KAPPA:
+        return math.nan
+    if k < TAYLOR_KAPPA:
+        return 1.0 / k + k
+    r = 1.0 + math.sqrt(1.0 + 4.0 * k * k)
+    rho = (r - math.sqrt(2.0 * r)) / (2.0 * k)
+    return (1.0 + rho * rho) / (2.0 * rho)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _draw(rng, k, s):
+    """(cos phi, sin phi) of one angle phi ~ von Mises(0, k), drawn as numpy draws it;
+    s = `_envelope(k)`, computed once per concentration."""
     if k < SMALL_KAPPA or k > LARGE_KAPPA:
         if k < SMALL_KAPPA:
             angle = math.pi * (2.0 * rng.random() - 1.0)
         else:
             angle = math.sqrt(1.0 / k) * rng.standard_normal()
         return math.cos(angle), math.sin(angle)
-    if k < TAYLOR_KAPPA:
-        s = 1.0 / k + k
-    else:
-        r = 1.0 + math.sqrt(1.0 + 4.0 * k * k)
-        rho = (r - math.sqrt(2.0 * r)) / (2.0 * k)
-        s = (1.0 + rho * rho) / (2.0 * rho)
     while True:
         z = math.cos(math.pi * rng.random())
         w = (1.0 + s * z) / (s + z)
@@ -60,9 +69,12 @@ def antithetic_turns(rng, kappa, cos_mu, sin_mu, columns, cos_out, sin_out):
     K - 1 - K//2 rows mu - phi of the first pairs. Row 0 is left alone."""
     pairs = cos_out.shape[0] // 2
     minus = cos_out.shape[0] - 1 - pairs
+    envelope = np.empty(columns.size)
+    for j in range(columns.size):
+        envelope[j] = _envelope(kappa[j])
     for i in range(pairs):
         for j in range(columns.size):
-            c, s = _draw(rng, kappa[j])
+            c, s = _draw(rng, kappa[j], envelope[j])
             col = columns[j]
             cm, sm = cos_mu[j], sin_mu[j]
             cos_out[1 + i, col], sin_out[1 + i, col] = cm * c - sm * s, sm * c + cm * s
