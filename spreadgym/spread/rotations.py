@@ -134,17 +134,19 @@ def copied_sample(throws: list[Throw], landings_m: list[np.ndarray], turns: list
         def of_copies(a: np.ndarray, row=row, copies=turn.copies) -> np.ndarray:
             """Per departed copy, copy-major: whole tiles when every granule departed (the usual case)."""
             return np.tile(a, (copies,) + (1,) * (a.ndim - 1)) if row is None else a[row % a.shape[0]]
-        if len(parts) == 1:
-            kept = np.ones(c.size, dtype=bool)
-        else:
+        mass = of_copies(g.mass_kg) / turn.copies
+        local_x = c * of_copies(landed_at[:, 0]) - s * of_copies(landed_at[:, 1])
+        replicate = of_copies(g.replicate)
+        lost = 0.0  # one disc: every copy is kept
+        if len(parts) > 1:
             other = np.subtract(parts[1 - i].centre_m, disc.centre_m)  # the other axis, this disc's frame
             axis = np.column_stack([c * other[0] + s * other[1], c * other[1] - s * other[0]])
             kept = ~onto_disc_axis(of_copies(launch.position_m), of_copies(launch.velocity_m_s),
                                    of_copies(g.radius_m), axis, parts[1 - i].scene.spinner.radius_m)
-        mass = of_copies(g.mass_kg) / turn.copies
-        local_x = (c * of_copies(landed_at[:, 0]) - s * of_copies(landed_at[:, 1]))[kept]
+            lost = float(mass[~kept].sum())
+            local_x, mass, replicate = local_x[kept], mass[kept], replicate[kept]
         xs.append(local_x + disc.centre_m[0])
-        masses.append(mass[kept])
-        replicates.append(of_copies(g.replicate)[kept])
-        lost_kg.append(float(mass[~kept].sum()))
+        masses.append(mass)
+        replicates.append(replicate)
+        lost_kg.append(lost)
     return TraySample(np.concatenate(xs), np.concatenate(masses), np.concatenate(replicates)), lost_kg
