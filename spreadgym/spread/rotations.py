@@ -84,8 +84,8 @@ def copy_turns(granules: GranuleBatch, scene: Scene, copies: int, seed: int, fir
     angle, so each is still a von Mises draw; the pair halves the draws and cancels the
     odd part of the noise). Only cos s and sin s are needed, and
     `von_mises.antithetic_turns` gives them without forming an angle. `granules` holds the
-    replicates first_replicate, first_replicate + 1, ... in order, `granules.replicate`
-    0, 1, ..."""
+    replicates first_replicate, first_replicate + 1, ... in order (each a consecutive run
+    of granules), `granules.replicate` 0, 1, ..."""
     n = granules.count
     if copies == 1:
         return Turn(np.ones(n), np.zeros(n), 1)
@@ -98,13 +98,17 @@ def copy_turns(granules: GranuleBatch, scene: Scene, copies: int, seed: int, fir
     to_feed = feed.angle_rad - np.arctan2(xy[:, 1], xy[:, 0])  # the mean of s
     cos_mu, sin_mu = np.cos(to_feed), np.sin(to_feed)
     kappa = r * feed.radius_m / feed.spread_m**2
-    for replicate in np.unique(granules.replicate):
-        rows = np.flatnonzero(granules.replicate == replicate)
-        rng = np.random.default_rng([seed, first_replicate + int(replicate), COPY_STREAM])
-        von_mises.antithetic_turns(rng, kappa[rows], cos_mu[rows], sin_mu[rows], rows, cos_turn, sin_turn)
+    # the replicates are consecutive runs of granules
+    starts = np.flatnonzero(np.diff(granules.replicate, prepend=-1))
+    for start, stop in zip(starts, [*starts[1:], n]):
+        rows = np.arange(start, stop)
+        rng = np.random.default_rng([seed, first_replicate + int(granules.replicate[start]), COPY_STREAM])
+        von_mises.antithetic_turns(rng, kappa[start:stop], cos_mu[start:stop], sin_mu[start:stop], rows, cos_turn,
+                                   sin_turn)
     # a point pulled back by the clip keeps its angle (s = 0)
-    held = pulled_back_by_clip(xy, scene)
-    cos_turn[:, held], sin_turn[:, held] = 1.0, 0.0
+    held = np.flatnonzero(pulled_back_by_clip(xy, scene))
+    if held.size:
+        cos_turn[:, held], sin_turn[:, held] = 1.0, 0.0
     return Turn(cos_turn.ravel(), sin_turn.ravel(), copies)
 
 
