@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from spreadgym.physics.compiled.layout import KERNEL
+from spreadgym.physics.compiled.layout import INLINED, KERNEL
 
 SPEED_FLOOR_M_S = 1e-12
 """Below this relative speed the disc drag is static (it balances the other forces up to mu_d g)."""
@@ -43,7 +43,7 @@ def free_acceleration(cx, cy, vx, vy, omega, drag):
     return ax, ay
 
 
-@KERNEL
+@INLINED
 def impact(vx, vy, s, nx, ny, radius, omega, restitution, mu, inv_kappa):
     """Impact on a surface of outward normal n: restitution on the approach speed and a
     Coulomb tangential impulse (at most mu times the normal impulse) that stops the slip
@@ -67,7 +67,7 @@ def impact(vx, vy, s, nx, ny, radius, omega, restitution, mu, inv_kappa):
     return vx, vy, s, approach
 
 
-@KERNEL
+@INLINED
 def disc_drag_impulse(vx, vy, impulse):
     """Velocity after a disc impact's friction impulse (per mass, mu J_n), never reversing v."""
     speed = math.sqrt(vx * vx + vy * vy)

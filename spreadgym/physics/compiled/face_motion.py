@@ -21,6 +21,7 @@ from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, illinois_step
 from spreadgym.physics.compiled.layout import (
     DISC_RADIUS,
     GRAVITY,
+    INLINED,
     INV_KAPPA,
     KERNEL,
     MU_DISC,
@@ -106,7 +107,7 @@ def _event_values(out, x, xd, s, sticking, eps, drag_sign, frame, radius, length
     out[4] = r * r - cx * cx - cy * cy
 
 
-@KERNEL
+@INLINED
 def step(x, xd, s, h, sticking, eps, drag_sign, frame, radius, length, P, work):
     """Advance up to h s along the face. Returns (x, x', s, time used, event)."""
     start, end = work[0], work[1]

@@ -16,7 +16,7 @@ import math
 
 from spreadgym.physics.compiled.contact_law import free_acceleration
 from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, newton_step
-from spreadgym.physics.compiled.layout import DISC_RADIUS, KERNEL, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
+from spreadgym.physics.compiled.layout import DISC_RADIUS, INLINED, KERNEL, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
 
 NONE = 0
 RIM = 1
@@ -74,7 +74,7 @@ def end_point(vane, end, V):
     return V[vane, PX] + length * V[vane, UX], V[vane, PY] + length * V[vane, UY]
 
 
-@KERNEL
+@INLINED
 def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     """Advance up to h s. Returns (cx, cy, vx, vy, time used, event, vane, side);
     side +1 is the leading face, -1 the trailing face; `reach` = granule radius + half
@@ -149,7 +149,7 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     return sx, sy, svx, svy, f * h, kind, vane, side
 
 
-@KERNEL
+@INLINED
 def overlap(cx, cy, reach, V):
     """First vane the granule overlaps: (vane, side, outward normal x, y, depth) with
     side +1/-1 for the leading/trailing flat face, 0 for a rounded end; vane -1 if none."""

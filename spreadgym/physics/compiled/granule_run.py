@@ -36,6 +36,7 @@ from spreadgym.physics.compiled.layout import (
     E_VANE,
     GRAVITY,
     HALF_THICKNESS,
+    INLINED,
     INV_KAPPA,
     KERNEL,
     LENGTH,
@@ -61,7 +62,7 @@ CX, CY, VX, VY, SPIN, Z, VZ, TIME, STALLED = range(9)
 OUT_SIZE = 9
 
 
-@KERNEL
+@INLINED
 def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
     """Impact on a surface of normal n; (vx, vy, s, stays in contact). A rebound whose
     flight back (2 e a / press) would be shorter than P[REBOUND_FLIGHT] ends the
@@ -79,7 +80,7 @@ def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
     return bx, by, bs, False
 
 
-@KERNEL
+@INLINED
 def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, slip_is_zero):
     """(sticking, eps, x') for a granule on a face: it rolls (no slip) if it does not slip
     and friction can hold that; otherwise it slides against its slip. `slip_is_zero`:
@@ -97,7 +98,7 @@ def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, slip_is_zero):
     return False, -math.copysign(1.0, f), xd
 
 
-@KERNEL
+@INLINED
 def _drag_sign(x, xd, frame, resting, P):
     """Direction of the disc's drag along the face (0 in the air); at x' = 0 it opposes the pull."""
     if not resting:

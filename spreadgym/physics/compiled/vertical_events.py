@@ -10,20 +10,20 @@ from __future__ import annotations
 
 import math
 
-from spreadgym.physics.compiled.layout import KERNEL
+from spreadgym.physics.compiled.layout import INLINED
 
 NO_EVENT = 0
 DISC_IMPACT = 1
 VANE_TOP_CROSSING = 2
 
 
-@KERNEL
+@INLINED
 def time_to_disc(z, vz, g):
     """Time (s) until a flying granule at height z (m), vertical speed vz (m/s) lands."""
     return (vz + math.sqrt(vz * vz + 2.0 * g * z)) / g
 
 
-@KERNEL
+@INLINED
 def time_to_level(z, vz, level, g, below):
     """Time (s) until the base crosses `level` (upwards if `below`, else downwards); inf if never."""
     if below:
@@ -34,7 +34,7 @@ def time_to_level(z, vz, level, g, below):
     return (vz + math.sqrt(vz * vz + 2.0 * g * max(z - level, 0.0))) / g
 
 
-@KERNEL
+@INLINED
 def next_event(z, vz, resting, below, level, g, horizon):
     """(time, kind) of the first vertical event within `horizon` s, else (horizon, NO_EVENT)."""
     t, kind = horizon, NO_EVENT
@@ -48,7 +48,7 @@ def next_event(z, vz, resting, below, level, g, horizon):
     return t, kind
 
 
-@KERNEL
+@INLINED
 def advance(z, vz, resting, dt, g):
     """Height and vertical speed after dt s of free flight (unchanged at rest)."""
     if resting:
@@ -56,7 +56,7 @@ def advance(z, vz, resting, dt, g):
     return max(z + vz * dt - 0.5 * g * dt * dt, 0.0), vz - g * dt
 
 
-@KERNEL
+@INLINED
 def disc_impact(vz, restitution, settle_speed):
     """Impact on the disc at vertical speed vz < 0: (vz after, resting, normal impulse per mass)."""
     v_impact = -vz
