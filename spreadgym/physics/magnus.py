@@ -46,8 +46,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from spreadgym.physics.compiled.layout import INLINED, KERNEL
 from spreadgym.physics.constants import SPHERE_INERTIA_FACTOR
 
 STOKES_TORQUE_RE_R = 32.0  # Re_R where C_R switches from 64 pi / Re_R to the Dennis et al. fit
@@ -108,8 +108,8 @@ def spin_table(spin_rad_s, diameter_m, density_kg_m3, air_density_kg_m3: float,
     return np.stack([np.sign(omega0), w0, slope, q, t_star, omega_low, lam])
 
 
-_INLINE = njit(cache=True, error_model="numpy", inline="always")
-"""Compiled and inlined into the flight kernel, which calls these per granule and stage."""
+# The per-step helpers below are INLINED into the flight kernel, which calls them per
+# granule and stage.
 
 STEP_SERIES_LIMIT = 1e-2
 """Largest q h for which `step_spin_base` lets a step's stages use the series of
@@ -117,7 +117,7 @@ expm1(q f h) (five terms: relative error below (q h)^5 / 720 < 2e-13) instead of
 closed form; q h is about 1e-3 in spreader flights (q ~ 0.02 /s, h <= 0.05 s)."""
 
 
-@_INLINE
+@INLINED
 def inverse_spin_size(t: float, table: np.ndarray, j: int) -> float:
     """1 / |omega| (s/rad) of granule j of `spin_table` at time t (s) after launch. On the
     upper branch it is u^2 (u = |omega|^-1/2 is the closed form's variable), with no
@@ -128,13 +128,13 @@ def inverse_spin_size(t: float, table: np.ndarray, j: int) -> float:
     return u * u
 
 
-@_INLINE
+@INLINED
 def spin_size(t: float, table: np.ndarray, j: int) -> float:
     """|omega| (rad/s) of granule j of `spin_table` at time t (s) after launch."""
     return 1.0 / inverse_spin_size(t, table, j)
 
 
-@_INLINE
+@INLINED
 def step_spin_base(t: float, h: float, table: np.ndarray, j: int) -> tuple[float, float, float]:
     """(u(t), u(t) + p/q, q h) for the stages of a step from t of length h (s): on the
     upper branch u(t + f h) = u(t) + (u(t) + p/q) expm1(q f h), so one expm1 per step
@@ -147,7 +147,7 @@ def step_spin_base(t: float, h: float, table: np.ndarray, j: int) -> tuple[float
     return table[_W0, j] + table[_SLOPE, j] * e, table[_SLOPE, j] * (e + 1.0), rate * h
 
 
-@_INLINE
+@INLINED
 def step_inverse_spin(u: float, growth: float, qh: float, fraction: float) -> float:
     """1 / |omega| (s/rad) at t + fraction h from `step_spin_base`'s (u, growth, qh >= 0)."""
     y = qh * fraction
@@ -155,7 +155,7 @@ def step_inverse_spin(u: float, growth: float, qh: float, fraction: float) -> fl
     return u * u
 
 
-@_INLINE
+@INLINED
 def lift_factor(lift: float, size2: float, inverse_spin: float, rx: float, ry: float, speed2: float) -> float:
     """f (1/s) with the lift acceleration f (-r_y, r_x) (m/s^2) of a granule moving at r
     relative to the air (speed2 = |r|^2, m^2/s^2), for lift = sign(omega) (3/8)(rho/rho_p)
@@ -172,7 +172,7 @@ def lift_factor(lift: float, size2: float, inverse_spin: float, rx: float, ry: f
     return lift * speed2 / math.sqrt(math.sqrt(max(a2 * a2 + b * b, 1e-300)))
 
 
-@njit(cache=True, error_model="numpy")
+@KERNEL
 def _spin_sizes(t: np.ndarray, table: np.ndarray, out: np.ndarray) -> None:
     for j in range(t.size):
         out[j] = spin_size(t[j], table, j)

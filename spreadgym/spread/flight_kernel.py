@@ -18,14 +18,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from spreadgym.physics import magnus
-from spreadgym.physics.compiled.layout import KERNEL
+from spreadgym.physics.compiled.layout import INLINED, KERNEL
 
-_INLINE = njit(cache=True, error_model="numpy", inline="always")
-"""KERNEL's options, inlined into the caller at compile time: the helpers run per stage
-and a call (with its array reference counting) cost about as much as their arithmetic."""
+# The helpers are INLINED: they run per stage, and a call (with its array reference
+# counting) cost about as much as their arithmetic.
 
 MAX_FLIGHT_S = 600.0  # a granule still airborne after this is a bug, not physics
 MAX_STEPS = 1_000_000  # per granule
@@ -55,7 +53,7 @@ _E = np.array([  # 5th minus 4th order weights: the error estimate
 ])
 
 
-@_INLINE
+@INLINED
 def _accel(vx, vy, vz, k, lift_factor, size2, inverse_spin, lift, wind_x, wind_y, g):
     """a = g - K |r| r (+ the Magnus lift, `magnus.lift_factor`) at velocity v; r = v - w.
     k: K (1/m); lift_factor, size2: the granule's rows 1 and 2 of `par`; inverse_spin:
@@ -74,7 +72,7 @@ def _accel(vx, vy, vz, k, lift_factor, size2, inverse_spin, lift, wind_x, wind_y
     return ax, ay, az
 
 
-@_INLINE
+@INLINED
 def _spin_bases(t, h, table, idx, lift, base):
     """Each lane's `magnus.step_spin_base` for its step (t, h), into base (3, L): one
     closed-form spin per lane and step instead of one per stage."""
@@ -83,7 +81,7 @@ def _spin_bases(t, h, table, idx, lift, base):
             base[0, q], base[1, q], base[2, q] = magnus.step_spin_base(t[q], h[q], table, idx[q])
 
 
-@_INLINE
+@INLINED
 def _inverse_spins(t, h, fraction, base, table, idx, lift, out):
     """1/|omega| (s/rad) of each lane's granule at time t + fraction * h, into out (L,),
     from the step's `base`; the closed form where the series does not serve (a loop of its
@@ -96,7 +94,7 @@ def _inverse_spins(t, h, fraction, base, table, idx, lift, out):
                 out[q] = magnus.inverse_spin_size(t[q] + fraction * h[q], table, idx[q])
 
 
-@_INLINE
+@INLINED
 def _dp_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
     """One Dormand-Prince step of length h[q] in every lane q from (x, v) (3, L) at time
     t (L,) with first stage a1: the stages go to sv, sa (7, 3, L) (row 6: the new velocity
@@ -126,7 +124,7 @@ def _dp_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lift
             x_new[c, q] = x[c, q] + h[q] * s
 
 
-@_INLINE
+@INLINED
 def _rk4_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lift, wind_x, wind_y, g):
     """Classical RK4 step in every lane, same interface as `_dp_stages` (stages 1-3 used,
     row 6 the result)."""
@@ -151,7 +149,7 @@ def _rk4_stages(x, v, a1, t, h, sv, sa, x_new, base, table, idx, kk, lf, cs, lif
             sv[6, 0, q], sv[6, 1, q], sv[6, 2, q], kk[q], lf[0, q], lf[1, q], cs[q], lift, wind_x, wind_y, g)
 
 
-@_INLINE
+@INLINED
 def _error_ratio(x, x_new, v, h, sv, sa, q, atol, rtol):
     """Largest |local error| / (atol + rtol * |state|) of lane q over positions and velocities."""
     ratio = 0.0
@@ -166,7 +164,7 @@ def _error_ratio(x, x_new, v, h, sv, sa, q, atol, rtol):
     return ratio
 
 
-@_INLINE
+@INLINED
 def _hermite_guess(z0, v0, z1, v1, h):
     """Fraction s in [0, 1] where the cubic Hermite interpolant of z(t) over the step
     (values z0 > 0 >= z1, slopes v0, v1) crosses zero: a starting guess."""
@@ -289,7 +287,7 @@ def fly_all(position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
     return failed
 
 
-@_INLINE
+@INLINED
 def _take(next_j, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
           x, v, a1, t, h, count, mode, idx, kk, lf, out_xy, out_t):
     """Put the next granule that is above the ground into lane q (those at height <= 0
