@@ -12,20 +12,20 @@ from __future__ import annotations
 
 import math
 
-from spreadgym.physics.compiled.layout import INLINED, KERNEL
+from spreadgym.physics.compiled.layout import INLINED
 
 SPEED_FLOOR_M_S = 1e-12
 """Below this relative speed the disc drag is static (it balances the other forces up to mu_d g)."""
 
 
-@KERNEL
+@INLINED
 def frame_acceleration(cx, cy, vx, vy, omega):
     """Centrifugal plus Coriolis acceleration (m/s^2) at position c, rotating-frame velocity v."""
     om2 = omega * omega
     return om2 * cx + 2.0 * omega * vy, om2 * cy - 2.0 * omega * vx
 
 
-@KERNEL
+@INLINED
 def free_acceleration(cx, cy, vx, vy, omega, drag):
     """Acceleration off the vanes; `drag` = mu_d g on the disc, 0 in the air."""
     ax, ay = frame_acceleration(cx, cy, vx, vy, omega)

@@ -16,7 +16,7 @@ import math
 
 from spreadgym.physics.compiled.contact_law import free_acceleration
 from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, newton_step
-from spreadgym.physics.compiled.layout import DISC_RADIUS, INLINED, KERNEL, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
+from spreadgym.physics.compiled.layout import DISC_RADIUS, INLINED, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
 
 NONE = 0
 RIM = 1
@@ -25,7 +25,7 @@ END_CAP = 3  # a rounded end of a vane (side 0: inner end, 1: tip)
 ON_SURFACE_M = 1e-12  # closer than this to a face line counts as on it (a rebound starts there)
 
 
-@KERNEL
+@INLINED
 def rk4(cx, cy, vx, vy, h, omega, drag):
     """One fourth-order step of length h (s)."""
     a1x, a1y = free_acceleration(cx, cy, vx, vy, omega, drag)
@@ -42,7 +42,7 @@ def rk4(cx, cy, vx, vy, h, omega, drag):
     return nx, ny, vx + h6 * (a1x + 2.0 * a2x + 2.0 * a3x + a4x), vy + h6 * (a1y + 2.0 * a2y + 2.0 * a3y + a4y)
 
 
-@KERNEL
+@INLINED
 def _event_value(kind, vane, side, cx, cy, reach, P, V):
     """Event function (positive before, negative after) of a rim or face crossing."""
     if kind == RIM:
@@ -55,7 +55,7 @@ def _event_value(kind, vane, side, cx, cy, reach, P, V):
     return side * d - reach
 
 
-@KERNEL
+@INLINED
 def _event_rate(kind, vane, side, cx, cy, vx, vy, V):
     """d/dt of `_event_value` at position c, velocity v (disc frame, where the vanes stand still)."""
     if kind == RIM:
@@ -67,7 +67,7 @@ def _event_rate(kind, vane, side, cx, cy, vx, vy, V):
     return side * (vx * V[vane, NX] + vy * V[vane, NY])
 
 
-@KERNEL
+@INLINED
 def end_point(vane, end, V):
     """Inner end (end 0) or tip (end 1) of a vane's centre line."""
     length = end * V[vane, LENGTH]

@@ -26,10 +26,11 @@ that would not have raised gives the same bits (no fastmath: results stay exact 
 
 INLINED = njit(cache=True, error_model="numpy", inline="always")
 """KERNEL for what `granule_run.run_one` calls at every pass of its loop (the phases'
-steps, the vertical events, the overlap test, the impacts): numba inlines them into the
-loop, which spares a call that passes the parameter arrays each time. Same operations
-in the same order, so the same bits; paper kernel 11.1 -> 10.1 ms (docs/performance.md).
-Inlining everything down to the accelerations gained ~3 % more for 3x the compile time."""
+steps, the vertical events, the overlap test, the impacts) and for the free phase's
+fourth-order step, event values and accelerations: numba inlines them into the loop,
+which spares a call that passes the parameter arrays each time. Same operations in the
+same order, so the same bits; paper kernel 11.1 -> 9.6 ms, cold compile 19 -> 30 s
+(docs/performance.md). Inlining the contact phase's helpers as well made it slower."""
 
 # Indices into P.
 OMEGA = 0  # signed spinner angular velocity, rad/s
