@@ -39,12 +39,17 @@ def apply_overrides(config: Mapping[str, Any], assignments: Mapping[str, Any], s
     `normalize: false`) is set as a whole; a section the config leaves out is created.
     The values are checked afterwards, when the result is validated against the schema.
     """
-    result = copy.deepcopy(dict(config))
+    return set_in_place(copy.deepcopy(dict(config)), assignments, schema)
+
+
+def set_in_place(tree: dict, assignments: Mapping[str, Any], schema: type[BaseModel]) -> dict:
+    """`apply_overrides` on `tree` itself (a tree the caller owns, e.g. a fresh
+    `model_dump()`), without the copy; returns `tree`."""
     for dotted, value in assignments.items():
         if not isinstance(dotted, str) or not dotted:
             raise ConfigError(str(dotted), "keys must be non-empty strings")
-        _set(result, dotted.split("."), value, schema)
-    return result
+        _set(tree, dotted.split("."), value, schema)
+    return tree
 
 
 def _set(tree: dict, parts: list[str], value: Any, schema: type[BaseModel]) -> None:

@@ -13,7 +13,7 @@ from typing import Annotated, Any, Literal, Mapping, Optional, TypeVar, Union
 from pydantic import Field, Strict, ValidationError, model_validator
 
 from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error, validate
-from spreadgym.config.overrides import apply_overrides
+from spreadgym.config.overrides import set_in_place
 from spreadgym.config.resources import read_yaml, resolve_named
 from spreadgym.errors import ConfigError
 
@@ -406,6 +406,6 @@ def scene_with(scene: Scene, overrides: Mapping[str, Any]) -> Scene:
     """A validated copy of `scene` with dotted-key overrides applied.
 
     Overrides act on the full dump (defaults included), so an optional key the YAML
-    left out can still be set.
+    left out can still be set. The dump is a fresh tree: it is changed in place.
     """
-    return scene_from_dict(apply_overrides(scene.model_dump(), overrides, Scene))
+    return scene_from_dict(set_in_place(scene.model_dump(), overrides, Scene))
