@@ -124,8 +124,10 @@ def _scrambled_sobol(rngs: list, count: int, dims: int) -> np.ndarray:
 def _sobol_points(shifts, lower, direction, count):
     """(R, count, dims) points from the shift bits (R, dims, bits; least significant
     first), the scramble matrices (R, dims, bits, bits; only the strict lower triangle
-    is read, the diagonal is 1) and the direction numbers (dims, bits)."""
+    is read, the diagonal is 1) and the direction numbers (dims, bits). A digit is the
+    parity of a row mask and a direction number, folded down from 32 bits: bits <= 32."""
     replicates, dims, bits = shifts.shape
+    assert bits <= 32
     points = np.empty((replicates, count, dims))
     scale = 1.0 / 2.0**bits
     numbers = np.empty(bits, dtype=np.uint64)
