@@ -106,7 +106,7 @@ def replicate_tray_masses(x_m: np.ndarray, mass_kg: np.ndarray, replicate: np.nd
     """The pooled `Trays` and the (K, T) tray masses of each replicate on the same row.
 
     `replicate` (N,) gives each granule's replicate index in 0..replicates-1."""
-    trays, index = pattern.collect_with_rows(x_m, mass_kg, tray_width_m, min_half_width_m=min_half_width_m)
+    trays, index = pattern.collect_indexed(x_m, mass_kg, tray_width_m, min_half_width_m=min_half_width_m)
     flat = np.asarray(replicate, dtype=np.int64) * trays.count + index
     weights = np.broadcast_to(np.asarray(mass_kg, dtype=float), index.shape)
     per_replicate = np.bincount(flat, weights=weights, minlength=replicates * trays.count)

@@ -143,11 +143,11 @@ def collect(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) ->
 
     The row has an odd number of trays centred on the axis and is wide enough to
     hold every granule and to reach at least min_half_width_m on each side."""
-    return collect_with_rows(x_m, mass_kg, tray_width_m, min_half_width_m)[0]
+    return collect_indexed(x_m, mass_kg, tray_width_m, min_half_width_m)[0]
 
 
-def collect_with_rows(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) -> tuple[Trays, np.ndarray]:
-    """`collect`, and the tray of each granule (0 .. count - 1, from the row's left end)."""
+def collect_indexed(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) -> tuple[Trays, np.ndarray]:
+    """`collect`, and the index of each granule's tray (0 .. count - 1, from the row's left end)."""
     w = _check_tray_width(tray_width_m)
     x = np.asarray(x_m, dtype=float).reshape(-1)
     mass = np.broadcast_to(np.asarray(mass_kg, dtype=float), x.shape)
@@ -165,9 +165,9 @@ def collect_with_rows(x_m, mass_kg, tray_width_m: float, min_half_width_m: float
     if count > MAX_TRAYS:
         raise ConfigError("pattern.tray_width_m", f"the pattern spans {count * w:.0f} m, {count} trays of {w:g} m; "
                                                   f"allowed up to {MAX_TRAYS} trays (use wider trays)")
-    row = idx + m
-    masses = np.bincount(row, weights=mass, minlength=count)
-    return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=masses, width_m=w), row
+    tray = idx + m
+    masses = np.bincount(tray, weights=mass, minlength=count)
+    return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=masses, width_m=w), tray
 
 
 def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.ndarray, np.ndarray]:
