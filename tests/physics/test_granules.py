@@ -44,3 +44,52 @@ def test_sampled_granules_equal_those_of_one_engine_per_replicate():
 def test_monte_carlo_draws_are_the_generators_own():
     got = granules.replicate_uniforms(4, np.array([3]), 10, sampler="mc")[0]
     assert np.array_equal(got, np.random.default_rng([4, 3]).random((10, 4)))
+
+
+def unscrambled_points(numbers: np.ndarray, count: int) -> np.ndarray:
+    """(count, dims) unscrambled Sobol points from direction numbers, in Gray-code order."""
+    point = np.zeros(numbers.shape[0], dtype=np.uint64)
+    points = [point.copy()]
+    for i in range(1, count):
+        point ^= numbers[:, (i & -i).bit_length() - 1]
+        points.append(point.copy())
+    return np.asarray(points) / 2.0**granules.SOBOL_BITS
+
+
+@pytest.mark.parametrize("dims", [1, 2, 4, 8])
+def test_direction_number_table_gives_scipys_unscrambled_points(dims):
+    """The first 2^13 points exercise direction numbers 0-12; the engine's own."""
+    engine = qmc.Sobol(dims, scramble=False, bits=granules.SOBOL_BITS)
+    assert np.array_equal(unscrambled_points(granules._direction_numbers(dims), 2**13), engine.random(2**13))
+
+
+@pytest.mark.parametrize("j", [13, 17, 21, 23])
+def test_high_direction_numbers_equal_scipys_engine(j):
+    """Point 2^(j+1) - 1 of the unscrambled sequence is direction number j alone."""
+    engine = qmc.Sobol(8, scramble=False, bits=granules.SOBOL_BITS)
+    engine.fast_forward(2 ** (j + 1) - 1)
+    expected = np.rint(engine.random(1)[0] * 2.0**granules.SOBOL_BITS).astype(np.uint64)
+    assert np.array_equal(granules._direction_numbers(8)[:, j], expected)
+
+
+def test_direction_number_table_holds_scipys_data():
+    """All 30 numbers of every tabled dimension, against scipy's own polynomials and initial
+    integers run through scipy's initialisation (its private helpers: the one check of
+    numbers 24-29 that costs no seconds of fast-forwarding)."""
+    from scipy.stats import _sobol
+
+    dims = len(granules.SOBOL_POLYNOMIALS)
+    poly = _sobol.get_poly_vinit("poly", np.uint64)
+    vinit = _sobol.get_poly_vinit("vinit", np.uint64)
+    assert tuple(int(p) for p in poly[:dims]) == granules.SOBOL_POLYNOMIALS
+    for d, initial in enumerate(granules.SOBOL_INITIAL[1:], start=1):
+        assert tuple(int(m) for m in vinit[d][:len(initial)]) == initial
+        assert not vinit[d][len(initial):].any()
+    sv = np.zeros((dims, granules.SOBOL_BITS), dtype=np.uint64)
+    _sobol._initialize_v(sv, dim=dims, bits=granules.SOBOL_BITS)
+    assert np.array_equal(granules._direction_numbers(dims), sv)
+
+
+def test_direction_numbers_beyond_the_table_are_refused():
+    with pytest.raises(ValueError, match="Sobol dimensions"):
+        granules._direction_numbers(len(granules.SOBOL_POLYNOMIALS) + 1)
