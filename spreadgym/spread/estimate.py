@@ -31,7 +31,7 @@ from functools import lru_cache
 from typing import Optional
 
 import numpy as np
-from scipy import stats
+from scipy.special import stdtrit
 
 from spreadgym.spread import pattern
 
@@ -88,7 +88,7 @@ def estimate_cv(replicate_masses: np.ndarray, tray_width_m: float, bout_width_m:
 @lru_cache(maxsize=None)
 def _t_quantile(dof: int) -> float:
     """Two-sided CONFIDENCE_LEVEL quantile of Student's t (cached: scipy's ppf costs ~0.5 ms)."""
-    return float(stats.t.ppf(0.5 + CONFIDENCE_LEVEL / 2, dof))
+    return float(stdtrit(dof, 0.5 + CONFIDENCE_LEVEL / 2))  # scipy.stats.t.ppf, without importing scipy.stats
 
 
 @dataclass(frozen=True)
