@@ -38,7 +38,6 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from spreadgym.config.scene import Flight
 from spreadgym.errors import ConfigError
@@ -188,6 +187,8 @@ def reference_landing(
     terminal event at z = 0: slow, for tests and benchmarks. With Magnus lift the
     spin is a seventh state, integrated from the torque law (not the closed form),
     and the lift is built literally: C_L(S) |r|^2 along omega x r / |omega x r|."""
+
+    from scipy.integrate import solve_ivp  # here: a reference for tests, not worth ~0.1 s of every start-up
 
     pos, height, vel, diameter, density, spin = _check_inputs(
         position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2, spin_rad_s
