@@ -56,10 +56,13 @@ from spreadgym.physics.compiled.layout import (
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT
 
 MAX_LOOPS = 200_000  # guard: a granule still looping after this many events counts as timed out
-MAX_STALLED = 1000  # guard: events in a row that do not advance time end the run (flagged)
-# Columns of the output state; STALLED is 1 for a run a guard ended.
-CX, CY, VX, VY, SPIN, Z, VZ, TIME, STALLED = range(9)
-OUT_SIZE = 9
+MAX_STALLED = 1000  # guard: this many events in a row that together advance time by no more
+STALL_FRACTION = 1e-6  # than this fraction of the largest step (P[STEP]) end the run (flagged).
+# A tolerance, not an exact zero: rounding (an FMA-contracted build) can leave each
+# stalled event a time of 1e-17 s instead of 0, which an exact test would take for progress.
+# Columns of the output state; STALLED is 1 for a run a guard ended, LOOPS its loop passes.
+CX, CY, VX, VY, SPIN, Z, VZ, TIME, STALLED, LOOPS = range(10)
+OUT_SIZE = 10
 
 
 @INLINED
@@ -130,6 +133,8 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
     work = np.empty((2, face_motion.EVENTS))
     n_track = track.shape[0]
     stalled, loop = 0, 0
+    stall_time = STALL_FRACTION * P[STEP]
+    progress_mark = 0.0  # the time at the last event that moved it on by more than stall_time
     check_overlap = below  # released onto a vane: pushed off it before anything moves
     came_down = below  # the overlap to check is one of a granule that came down onto a vane
     clearing = -1  # a vane the granule came down onto that moves away from it, until it is clear
@@ -243,7 +248,10 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
                     outcome = RETAINED_STUCK
         z, vz = vertical_events.advance(z, vz, resting, used, g)
         t += used
-        stalled = stalled + 1 if used == 0.0 else 0
+        if t > progress_mark + stall_time:
+            progress_mark, stalled = t, 0
+        else:
+            stalled += 1
         if stalled >= MAX_STALLED:
             break
         if outcome != RETAINED_TIMEOUT:
@@ -268,6 +276,7 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
     out[CX], out[CY], out[VX], out[VY], out[SPIN] = cx, cy, vx, vy, s
     out[Z], out[VZ], out[TIME] = z, vz, t
     out[STALLED] = 1.0 if (stalled >= MAX_STALLED or loop == MAX_LOOPS - 1) and outcome == RETAINED_TIMEOUT else 0.0
+    out[LOOPS] = loop + 1
     return outcome
 
 

@@ -8,6 +8,7 @@ machine frame here. Same outcomes, fields and time origin as simulate_pymunk.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
@@ -25,6 +26,51 @@ from spreadgym.physics.vertical import free_fall_to
 MAX_TRACK_POINTS = 20_000
 
 
+@dataclass(frozen=True)
+class KernelInputs:
+    """What the kernel takes for one scene's granules (disc frame at the vane tops), and
+    the frame turns that bring its output back to the machine frame."""
+
+    start: np.ndarray  # (N, 2) release points in the disc frame when the run starts, m
+    radius: np.ndarray  # (N,) granule radii, m
+    z0: float  # base height where the run starts, m
+    vz0: float  # vertical speed there, m/s
+    params: np.ndarray  # layout.P
+    vanes: np.ndarray  # layout.V
+    spinner_angle: np.ndarray  # (N,) the spinner's angle when each run starts, rad
+    t_fall: float  # s from release to the vane tops
+
+
+def kernel_inputs(scene: Scene, granules: GranuleBatch, contacts: Contacts) -> KernelInputs:
+    """The kernel's inputs for `granules` on `scene` (SI units)."""
+    vane_top = scene.vanes.height_m
+    drop = scene.feed.drop_height_m
+    t_fall, vz_fall = free_fall_to(vane_top, drop)
+    spinner_angle = granules.phase_rad + scene.spinner.omega_rad_s * t_fall
+    resolved = choose_time_step(scene, float(granules.radius_m.min())).dt_s
+    return KernelInputs(
+        start=np.ascontiguousarray(rotate(granules.release_xy_m, -spinner_angle)),
+        radius=np.ascontiguousarray(granules.radius_m, dtype=np.float64),
+        z0=float(min(drop, vane_top)),
+        vz0=float(vz_fall),
+        params=pack_parameters(scene, contacts, resolved, MAX_SPINNER_TIME_S, STUCK_SPEED_M_S),
+        vanes=pack_vanes(scene),
+        spinner_angle=spinner_angle,
+        t_fall=t_fall,
+    )
+
+
+def run_kernel(inputs: KernelInputs, track_count: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(out (N, OUT_SIZE), outcome (N,), tracks (k, MAX_TRACK_POINTS, 3)) of one scene's granules."""
+    n = inputs.radius.shape[0]
+    out = np.zeros((n, granule_run.OUT_SIZE))
+    outcome = np.zeros(n, dtype=np.int8)
+    tracks = np.full((min(track_count, n), MAX_TRACK_POINTS, 3), np.nan)
+    granule_run.run_all(inputs.start, inputs.radius, inputs.z0, inputs.vz0, inputs.params, inputs.vanes, out,
+                        outcome, tracks)
+    return out, outcome, tracks
+
+
 def simulate_compiled(
     scene: Scene,
     granules: GranuleBatch,
@@ -37,35 +83,26 @@ def simulate_compiled(
     Bounces (off the disc and off the vanes) are followed down to a flight as short as
     the pymunk model's time step; shorter ones end the bouncing, as they do there.
     """
-    omega = scene.spinner.omega_rad_s
-    vane_top = scene.vanes.height_m
-    drop = scene.feed.drop_height_m
-    t_fall, vz_fall = free_fall_to(vane_top, drop)
-    z0 = min(drop, vane_top)
-    spinner_angle = granules.phase_rad + omega * t_fall
-    start = np.ascontiguousarray(rotate(granules.release_xy_m, -spinner_angle))
-    resolved = choose_time_step(scene, float(granules.radius_m.min())).dt_s
-    params = pack_parameters(scene, contacts, resolved, MAX_SPINNER_TIME_S, STUCK_SPEED_M_S)
-    vanes = pack_vanes(scene)
-    n = granules.count
-    out = np.zeros((n, granule_run.OUT_SIZE))
-    outcome = np.zeros(n, dtype=np.int8)
-    n_track = min(track_count, n)
-    tracks = np.full((n_track, MAX_TRACK_POINTS, 3), np.nan)
-    radius = np.ascontiguousarray(granules.radius_m, dtype=np.float64)
-    granule_run.run_all(start, radius, float(z0), float(vz_fall), params, vanes, out, outcome, tracks)
+    inputs = kernel_inputs(scene, granules, contacts)
+    out, outcome, tracks = run_kernel(inputs, track_count)
     if progress is not None:
         progress(float(out[:, granule_run.TIME].max(initial=0.0)))
+    return departure_from(inputs, scene.spinner.omega_rad_s, out, outcome, tracks)
 
+
+def departure_from(inputs: KernelInputs, omega: float, out: np.ndarray, outcome: np.ndarray,
+                   tracks: np.ndarray) -> Departure:
+    """The departure states (machine frame) from the kernel's output for `inputs`."""
     t = out[:, granule_run.TIME]
     c = out[:, [granule_run.CX, granule_run.CY]]
     v = out[:, [granule_run.VX, granule_run.VY]]
     v_inertial = v + omega * np.stack([-c[:, 1], c[:, 0]], axis=1)
-    turn = spinner_angle + omega * t
+    turn = inputs.spinner_angle + omega * t
+    params = inputs.params
     notes = [
         f"largest step {params[STEP]:.3g} s (|omega| dt = {OMEGA_STEP:g}), cut at every event "
         "(disc impacts, vane contacts, rolling/sliding changes, the rim)",
-        f"free fall above the vane tops solved exactly ({t_fall * 1e3:.1f} ms)",
+        f"free fall above the vane tops solved exactly ({inputs.t_fall * 1e3:.1f} ms)",
     ]
     stalled = int(out[:, granule_run.STALLED].sum())
     if stalled:
@@ -76,13 +113,13 @@ def simulate_compiled(
         spin_rad_s=out[:, granule_run.SPIN].copy(),
         height_m=out[:, granule_run.Z].copy(),
         vertical_velocity_m_s=out[:, granule_run.VZ].copy(),
-        time_s=t + t_fall,
+        time_s=t + inputs.t_fall,
         outcome=outcome,
         model="compiled",
         dt_s=float(params[STEP]),
         notes=notes,
-        tracks=[_machine_track(tracks[k], spinner_angle[k], omega, rotate(c[k:k + 1], turn[k:k + 1])[0])
-                for k in range(n_track)],
+        tracks=[_machine_track(tracks[k], inputs.spinner_angle[k], omega, rotate(c[k:k + 1], turn[k:k + 1])[0])
+                for k in range(tracks.shape[0])],
     )
 
 
