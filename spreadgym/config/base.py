@@ -11,6 +11,7 @@ naming the dotted key, the bad value and the allowed range; `validate` applies i
 from __future__ import annotations
 
 import re
+import reprlib
 from typing import Annotated, Any, Optional, TypeVar
 
 import annotated_types
@@ -27,6 +28,15 @@ class StrictModel(BaseModel):
 
 
 ModelT = TypeVar("ModelT", bound=BaseModel)
+
+_BRIEF = reprlib.Repr()
+_BRIEF.maxlevel, _BRIEF.maxlist, _BRIEF.maxtuple, _BRIEF.maxdict = 2, 4, 4, 4
+_BRIEF.maxstring, _BRIEF.maxother, _BRIEF.maxlong = 60, 60, 40
+
+
+def brief(value: Any) -> str:
+    """`repr(value)` cut to a few dozen characters (a message never spells out a huge value)."""
+    return _BRIEF.repr(value)
 
 
 _BOUNDS = {annotated_types.Ge: (">=", "ge"), annotated_types.Gt: (">", "gt"), annotated_types.Le: ("<=", "le"),
@@ -89,9 +99,7 @@ def format_validation_error(exc: ValidationError, model: type[BaseModel], root: 
     if first["type"] == "extra_forbidden":
         return ConfigError(key, "unknown key")
     if first["type"] != "value_error":
-        value = first.get("input")
-        shown = repr(value) if not isinstance(value, (dict, list)) or len(repr(value)) < 80 else type(value).__name__
-        message += f" (got {shown})"
+        message += f" (got {brief(first.get('input'))})"
         allowed = field_range(model, loc)
         if allowed and first["type"] in {"greater_than", "greater_than_equal", "less_than", "less_than_equal",
                                           "finite_number"}:

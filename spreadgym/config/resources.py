@@ -1,4 +1,12 @@
-"""Locating and reading the YAML files shipped under configs/ (package data)."""
+"""Locating and reading YAML: the files shipped under configs/ (package data), scene and
+config files given by path, and `--set` values.
+
+YAML is data with limits, checked while it is read, so that no file can hang the reader
+or fill the memory: a file holds at most `MAX_YAML_BYTES`; collections nest at most
+`MAX_YAML_DEPTH` deep; and the document, with every alias counted as the copy it stands
+for, has at most `MAX_YAML_NODES` nodes (a "billion laughs" of nested aliases is refused
+before anything is built from it). A recursive alias is refused too.
+"""
 
 from __future__ import annotations
 
@@ -11,9 +19,66 @@ import yaml
 
 from spreadgym.errors import ConfigError
 
+MAX_YAML_BYTES = 1_000_000  # a scene is about 1.5 kB; the material library under 4 kB
+MAX_YAML_DEPTH = 50  # nested lists and mappings; a scene nests 4 deep
+MAX_YAML_NODES = 100_000  # scalars, lists and mappings, each alias counted as what it expands to
+
+
+class YamlLimitError(yaml.MarkedYAMLError):
+    """A YAML text beyond one of the limits (depth, expanded size, recursive alias)."""
+
 
 class NumberLoader(yaml.SafeLoader):
-    """YAML 1.1's safe loader, but `1e9` and `2e-4` are numbers (YAML 1.2 and Python agree)."""
+    """YAML 1.1's safe loader, but `1e9` and `2e-4` are numbers (YAML 1.2 and Python agree),
+    and the document stays within `MAX_YAML_DEPTH` and `MAX_YAML_NODES`."""
+
+    _depth = 0
+
+    def compose_node(self, parent, index):
+        if self._depth >= MAX_YAML_DEPTH:
+            raise YamlLimitError(problem=f"nested deeper than {MAX_YAML_DEPTH} levels; allowed: at most "
+                                         f"{MAX_YAML_DEPTH}", problem_mark=self.peek_event().start_mark)
+        self._depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def compose_document(self):
+        node = super().compose_document()
+        _expanded_size(node, 0, {})
+        return node
+
+
+def _expanded_size(node: yaml.Node, depth: int, seen: dict) -> int:
+    """Nodes below and at `node` with aliases expanded; refuses a document beyond the
+    limits (each distinct node is measured once, so a bomb costs its text, not its expansion)."""
+    known = seen.get(id(node))
+    if known is not None:
+        size, below = known
+        if size is None:
+            raise YamlLimitError(problem="an alias refers to a collection that contains it (a recursive "
+                                         "alias); not allowed", problem_mark=node.start_mark)
+        if depth + below > MAX_YAML_DEPTH:
+            raise YamlLimitError(problem=f"aliases nest deeper than {MAX_YAML_DEPTH} levels; allowed: at most "
+                                         f"{MAX_YAML_DEPTH}", problem_mark=node.start_mark)
+        return size
+    seen[id(node)] = (None, 0)
+    if isinstance(node, yaml.SequenceNode):
+        children = node.value
+    elif isinstance(node, yaml.MappingNode):
+        children = [part for pair in node.value for part in pair]
+    else:
+        children = []
+    size, below = 1, 0
+    for child in children:
+        size += _expanded_size(child, depth + 1, seen)
+        below = max(below, 1 + seen[id(child)][1])
+        if size > MAX_YAML_NODES:
+            raise YamlLimitError(problem=f"expands (aliases counted as copies) to more than {MAX_YAML_NODES} "
+                                         f"values; allowed: at most {MAX_YAML_NODES}", problem_mark=node.start_mark)
+    seen[id(node)] = (size, below)
+    return size
 
 
 NumberLoader.add_implicit_resolver(
@@ -26,8 +91,10 @@ NumberLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
-def parse_yaml(text) -> Any:
-    """Parse YAML text or a stream with `NumberLoader`."""
+def parse_yaml(text: str) -> Any:
+    """Parse YAML text with `NumberLoader` (a text over `MAX_YAML_BYTES` is a YamlLimitError)."""
+    if len(text) > MAX_YAML_BYTES:
+        raise YamlLimitError(problem=f"{len(text)} characters; allowed: at most {MAX_YAML_BYTES}")
     return yaml.load(text, Loader=NumberLoader)  # noqa: S506 - a SafeLoader subclass
 
 
@@ -37,10 +104,15 @@ def config_dir() -> Path:
 
 
 def read_yaml(path: Path) -> Any:
-    """Parse a YAML file; a syntax error becomes a ConfigError naming the file."""
+    """Parse a YAML file of at most `MAX_YAML_BYTES`; a syntax error or a limit passed
+    becomes a ConfigError naming the file."""
     try:
-        with open(path, encoding="utf-8") as handle:
-            return parse_yaml(handle)
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_YAML_BYTES + 1)  # never more, whatever the file (or /dev/zero)
+        if len(data) > MAX_YAML_BYTES:
+            raise ConfigError(str(path), f"larger than {MAX_YAML_BYTES} bytes (1 MB); allowed: at most "
+                                         f"{MAX_YAML_BYTES} bytes")
+        return parse_yaml(data.decode("utf-8"))
     except FileNotFoundError as exc:
         raise ConfigError(str(path), "file not found") from exc
     except IsADirectoryError as exc:
@@ -51,6 +123,8 @@ def read_yaml(path: Path) -> Any:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or type(exc).__name__
+        if isinstance(exc, YamlLimitError):
+            raise ConfigError(str(path), f"YAML{where} {problem}") from None
         raise ConfigError(str(path), f"not valid YAML{where}: {problem}") from exc
 
 
