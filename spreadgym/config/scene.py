@@ -27,6 +27,11 @@ MAX_ANGLE_DEG = 360.0
 MAX_PLANE_M = 5.0  # plates and feed points lie within this distance of the disc axis
 MAX_SPACING_M = 3.0  # between the axes of twin discs; machines carry them 0.6-1.2 m apart
 MIN_DT_S = 1e-6  # far below every model's automatic step (5e-5 to 2e-4 s): smaller only costs time
+MAX_DEFLECTORS = 32  # plates on one machine; spreaders carry a handful
+MAX_GRANULE_COPIES = 4_000_000
+"""Landing points one run may hold: sim.granules x sim.angle_copies x discs (about 100 bytes
+each at the peak, so a run stays near 0.4 GiB of arrays)."""
+MIN_BOUT_TRAYS = 2  # a bout of one tray has no spread to measure: its CV is 0 whatever the pattern
 ModelT = TypeVar("ModelT", bound=StrictModel)
 WindComponent = Annotated[Real, Field(ge=-MAX_WIND_M_S, le=MAX_WIND_M_S)]
 Angle = Annotated[Real, Field(ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG)]
@@ -179,21 +184,33 @@ class Pattern(StrictModel):
     tray_width_m: Real = Field(default=0.5, ge=0.05, le=5.0)
     driving: Literal["racetrack", "back-and-forth"] = "racetrack"
     cv_threshold_percent: Real = Field(default=15.0, gt=0, le=100.0)
-    target_swath_m: Real = Field(gt=0, le=100.0)
+    target_swath_m: Real = Field(gt=0, le=100.0, description="at least two trays wide")
 
     @model_validator(mode="after")
     def _target_on_tray_grid(self) -> "Pattern":
-        ratio = self.target_swath_m / self.tray_width_m
-        if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
-            raise ValueError(
-                f"target_swath_m: {self.target_swath_m} is not a positive multiple of "
-                f"tray_width_m ({self.tray_width_m})"
-            )
+        try:
+            bout_trays(self.target_swath_m, self.tray_width_m)
+        except ValueError as exc:
+            raise ValueError(f"target_swath_m: {exc}") from None
         return self
 
 
+def bout_trays(width_m: float, tray_width_m: float) -> int:
+    """Trays in a bout `width_m` wide; a ValueError unless the width is on the tray grid
+    and at least `MIN_BOUT_TRAYS` trays wide."""
+    ratio = width_m / tray_width_m
+    if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
+        raise ValueError(f"{width_m:g} m is off the tray grid: not a positive multiple of tray_width_m "
+                         f"({tray_width_m:g} m)")
+    if round(ratio) < MIN_BOUT_TRAYS:
+        raise ValueError(f"{width_m:g} m is narrower than {MIN_BOUT_TRAYS} trays of {tray_width_m:g} m: a bout of "
+                         f"fewer has no spread to measure (its CV is 0 whatever the pattern); allowed: >= "
+                         f"{MIN_BOUT_TRAYS * tray_width_m:g} m")
+    return int(round(ratio))
+
+
 class Sim(StrictModel):
-    granules: Integer = Field(ge=1, le=1_000_000)
+    granules: Integer = Field(ge=1, le=1_000_000, description="x sim.angle_copies x discs at most 4e6 (memory)")
     dt_s: Optional[Real] = Field(default=None, ge=MIN_DT_S, le=0.01, description="null: chosen from the scene")
     seed: Integer = Field(default=0, ge=0)
     sampler: Literal["qmc", "mc"] = Field(
@@ -260,11 +277,21 @@ class Scene(StrictModel):
     feed: Feed
     granule: Granule = Granule()
     contact: Contact = Contact()
-    deflectors: list[Deflector] = Field(default_factory=list)
+    deflectors: list[Deflector] = Field(default_factory=list, max_length=MAX_DEFLECTORS, description="at most 32 plates")
     twin: Optional[Twin] = Field(default=None, description="a second disc (null: one disc)")
     flight: Flight = Flight()
     pattern: Pattern
     sim: Sim
+
+    @model_validator(mode="after")
+    def _work_bounded(self) -> "Scene":
+        copies = granule_copies(self)
+        if copies > MAX_GRANULE_COPIES:
+            discs = "" if self.twin is None else " x 2 discs"
+            raise ValueError(f"sim.granules: {self.sim.granules} x sim.angle_copies {self.sim.angle_copies}{discs} "
+                             f"= {copies} landing points per run; allowed: at most {MAX_GRANULE_COPIES} "
+                             "(lower sim.granules or sim.angle_copies)")
+        return self
 
     @model_validator(mode="after")
     def _geometry(self) -> "Scene":
@@ -381,6 +408,21 @@ def _segment_distance_to_origin(a: tuple[float, float], b: tuple[float, float]) 
     length2 = dx * dx + dy * dy
     t = max(0.0, min(1.0, -(ax * dx + ay * dy) / length2)) if length2 > 0 else 0.0
     return math.hypot(ax + t * dx, ay + t * dy)
+
+
+def granule_copies(scene: Scene, runs: int = 1) -> int:
+    """Landing points `runs` runs of `scene` hold at most: granules x angle copies x discs x runs."""
+    return int(runs) * scene.sim.granules * scene.sim.angle_copies * (1 if scene.twin is None else 2)
+
+
+def check_pooled_work(scene: Scene, runs: int, flag: str) -> None:
+    """Refuse `runs` pooled runs of `scene` (all landing points kept) beyond
+    `MAX_GRANULE_COPIES`, naming `flag` (e.g. "--replicates") and the keys that set the rest."""
+    copies = granule_copies(scene, runs)
+    if copies > MAX_GRANULE_COPIES:
+        raise ConfigError(flag, f"{runs} runs x {granule_copies(scene)} landing points per run (sim.granules x "
+                                f"sim.angle_copies{'' if scene.twin is None else ' x 2 discs'}) = {copies}; "
+                                f"allowed: at most {MAX_GRANULE_COPIES} in all (fewer runs or granules)")
 
 
 def scene_from_dict(raw: Mapping[str, Any]) -> Scene:
