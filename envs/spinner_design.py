@@ -46,6 +46,7 @@ class SpinnerDesignEnv(SpreadgymEnv):
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
+        self._context = self._last = None  # a reset that fails leaves an env that needs one
         context = self.task.sample_context(self.np_random)
         self._sim_seed = int(self.np_random.integers(SEED_BOUND))
         if options:

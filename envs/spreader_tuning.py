@@ -103,6 +103,7 @@ class SpreaderTuningEnv(SpreadgymEnv):
     # -- gymnasium API -----------------------------------------------------------------
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
+        self._context = self._last = None  # a reset that fails leaves an env that needs one
         smap = self.task.settings_map
         context = self.task.sample_context(self.np_random)
         if options:

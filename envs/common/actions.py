@@ -26,6 +26,7 @@ from typing import Any, Mapping, Optional
 import numpy as np
 from gymnasium import spaces
 
+from spreadgym.config.base import brief
 from spreadgym.config.scene import Scene
 from spreadgym.config.settings import SettingsSpace
 from spreadgym.envs.common.config import SettingsConfig
@@ -62,11 +63,16 @@ class Settings:
 
 def check_action(action, size: int) -> np.ndarray:
     """The action as float64 of shape (size,), clipped to [-1, 1]; anything else is refused
-    (ValueError naming what was given): other shapes, non-numbers, non-finite entries."""
+    (ValueError naming what was given): other shapes, non-numbers (complex ones included),
+    non-finite entries."""
     try:
-        a = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"action must be {size} finite numbers, got {action!r}") from None
+        given = np.asarray(action)
+    except (TypeError, ValueError):  # ragged nesting
+        given = np.asarray(None)
+    if given.dtype.kind not in "biuf":
+        kind = "real numbers (no imaginary part)" if given.dtype.kind == "c" else "finite numbers"
+        raise ValueError(f"action must be {size} {kind}, got {brief(action)}")
+    a = given.astype(np.float64)
     if a.shape != (size,):
         raise ValueError(f"action must have shape ({size},), got {a.shape}")
     if not np.all(np.isfinite(a)):

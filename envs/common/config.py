@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from typing import Any, Literal, Mapping, Optional
 
-from pydantic import BaseModel, Field, field_validator
+from pydantic import BaseModel, Field, field_validator, model_validator
 
 from spreadgym.config.base import Integer, Real, StrictModel, validate
 from spreadgym.config.overrides import apply_overrides
@@ -57,6 +57,14 @@ class ContextConfig(StrictModel):
     forward_speed_m_s: tuple[Real, Real] = (0.0, 0.0)
     wind_x_m_s: tuple[Real, Real] = (0.0, 0.0)
     wind_y_m_s: tuple[Real, Real] = (0.0, 0.0)
+
+    @field_validator("fertilizers", "spinner_materials")
+    @classmethod
+    def _each_once(cls, v):
+        twice = next((name for i, name in enumerate(v) if name in v[:i]), None)
+        if twice is not None:
+            raise ValueError(f"{twice!r} is listed twice; give each name once")
+        return v
 
     @field_validator("target_swath_m")
     @classmethod
@@ -135,6 +143,31 @@ class ObservationConfig(StrictModel):
     bout_bins: Integer = Field(default=16, ge=1, le=1000)
 
 
+CONTEXT_SETS = {
+    "fertilizer": "context.fertilizers",
+    "spinner.material": "context.spinner_materials",
+    "pattern.target_swath_m": "context.target_swath_m",
+    "flight.forward_speed_m_s": "context.forward_speed_m_s",
+    "flight.wind_m_s": "context.wind_x_m_s and context.wind_y_m_s",
+    "sim.granules": "granules",
+    "sim.seed": "the seed of reset() (a granule sample is drawn from np_random each episode)",
+}
+"""Scene keys the env sets itself, and what sets them: a scene override of one would be ignored."""
+
+
+def _sets(key: str, value: Any, replaced: str) -> bool:
+    """Whether the override `key: value` sets the scene key `replaced` (or part of it)."""
+    if key == replaced or key.startswith(replaced + "."):
+        return True
+    if not replaced.startswith(key + "."):
+        return False
+    for part in replaced[len(key) + 1:].split("."):
+        if not isinstance(value, Mapping) or part not in value:
+            return False
+        value = value[part]
+    return True
+
+
 class DesignConfig(StrictModel):
     scene: str = Field(default="paper", description="shipped scene name or YAML path")
     scene_overrides: dict[str, Any] = Field(default_factory=dict, description="dotted scene keys")
@@ -147,6 +180,15 @@ class DesignConfig(StrictModel):
     settings: SettingsConfig = SettingsConfig()
     reward: RewardConfig = RewardConfig()
     render: RenderConfig = RenderConfig()
+
+    @model_validator(mode="after")
+    def _overrides_not_replaced(self) -> "DesignConfig":
+        for key, value in self.scene_overrides.items():
+            for replaced, source in CONTEXT_SETS.items():
+                if _sets(key, value, replaced):
+                    raise ValueError(f"scene_overrides.{key}: the env sets {replaced} itself from {source}, "
+                                     "so this override would be ignored; set that instead")
+        return self
 
 
 class TuningConfig(DesignConfig):

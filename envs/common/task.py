@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from spreadgym.config.base import brief
 from spreadgym.config.materials import load_library
-from spreadgym.config.scene import Scene, load_scene, scene_with
+from spreadgym.config.scene import MIN_BOUT_TRAYS, Scene, load_scene, scene_with
 from spreadgym.envs.common.actions import Settings, SettingsMap
 from spreadgym.envs.common.config import DesignConfig
 from spreadgym.errors import ConfigError, MaterialError
@@ -93,13 +94,14 @@ class Task:
         self.tray_width_m = self.base_scene.pattern.tray_width_m
         lo, hi = ctx.target_swath_m
         self.tray_counts = (
-            max(1, math.ceil(lo / self.tray_width_m - 1e-9)),
+            max(MIN_BOUT_TRAYS, math.ceil(lo / self.tray_width_m - 1e-9)),
             math.floor(hi / self.tray_width_m + 1e-9),
         )
         if self.tray_counts[0] > self.tray_counts[1]:
             raise ConfigError(
                 "context.target_swath_m",
-                f"[{lo}, {hi}] m holds no multiple of the tray width {self.tray_width_m} m",
+                f"[{lo}, {hi}] m holds no multiple of the tray width {self.tray_width_m} m of at least "
+                f"{MIN_BOUT_TRAYS} trays",
             )
         self.settings_map = SettingsMap(self.base_scene, cfg.settings)
         # Every fertilizer/material pair must resolve and the model must accept the scene.
@@ -150,9 +152,11 @@ class Task:
             raise ConfigError("options.context.spinner_material", f"must be one of {ctx.spinner_materials}")
         wind = values["wind_m_s"]
         if not (isinstance(wind, (list, tuple)) and len(wind) == 2):
-            raise ConfigError("options.context.wind_m_s", f"expected [x, y], got {wind!r}")
-        out = Context(values["fertilizer"], values["spinner_material"], float(values["target_swath_m"]),
-                      float(values["forward_speed_m_s"]), (float(wind[0]), float(wind[1])))
+            raise ConfigError("options.context.wind_m_s", f"expected [x, y], got {brief(wind)}")
+        out = Context(values["fertilizer"], values["spinner_material"],
+                      _real("target_swath_m", values["target_swath_m"]),
+                      _real("forward_speed_m_s", values["forward_speed_m_s"]),
+                      (_real("wind_m_s.0", wind[0]), _real("wind_m_s.1", wind[1])))
         self.context_scene(out)  # validates swath on the tray grid, speeds
         return out
 
@@ -234,6 +238,13 @@ class Task:
         tracks = self.cfg.render.disc_tracks if rendering else 0
         return run_scene(scene, model=self.cfg.model, library=self.library, ci=self.cfg.confidence_interval,
                          tracks=tracks)
+
+
+def _real(key: str, value: Any) -> float:
+    """A context number of reset's options as a float; anything but a real number is a ConfigError."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ConfigError(f"options.context.{key}", f"expected a number, got {brief(value)}")
+    return float(value)
 
 
 RESET_OPTIONS = ("context",)
