@@ -13,10 +13,7 @@ from typing import Optional
 import numpy as np
 
 from spreadgym.agents.chart.spec import Cell, ChartSpec
-from spreadgym.agents.chart.store import ChartStore, json_text, write_atomic
-
-HEAD = ["fertilizer", "width_m", "driving"]
-TAIL = ["cv_percent", "cv_standard_error_percent", "effective_swath_m", "cv_search_percent", "simulations", "wall_s"]
+from spreadgym.agents.chart.store import CHART_FILES, HEAD, TAIL, ChartStore, json_text, write_atomic
 
 
 def columns(rows: list[dict]) -> list[str]:
@@ -47,8 +44,9 @@ def chart_payload(spec: ChartSpec, records: list[dict], notes: list[str]) -> dic
 
 
 def write_chart(store: ChartStore, records: list[dict], notes: list[str]) -> tuple[list[Path], dict]:
-    """chart.csv, chart.json, chart.md and chart.png in the store's folder; (files, chart.json's payload)."""
-    spec, out = store.spec, store.out
+    """chart.csv, chart.json, chart.md and chart.png in the store's folder, each made in full
+    before the first is written; (files, chart.json's payload)."""
+    spec = store.spec
     payload = chart_payload(spec, records, notes)
     rows, cols = payload["rows"], payload["columns"]
     buffer = io.StringIO()
@@ -56,11 +54,9 @@ def write_chart(store: ChartStore, records: list[dict], notes: list[str]) -> tup
     writer.writeheader()
     for row in rows:
         writer.writerow({k: ("" if row.get(k) is None else row[k]) for k in cols})
-    written = [write_atomic(out / "chart.csv", buffer.getvalue()),
-               write_atomic(out / "chart.json", json_text(payload)),
-               write_atomic(out / "chart.md", markdown(spec, payload))]
-    written.append(chart_figure(out / "chart.png", spec, rows, payload["cv_threshold_percent"]))
-    return written, payload
+    contents = (buffer.getvalue(), json_text(payload), markdown(spec, payload),
+                chart_figure(spec, rows, payload["cv_threshold_percent"]))
+    return [write_atomic(store.out / name, content) for name, content in zip(CHART_FILES, contents)], payload
 
 
 def _fmt(value, digits: int = 3) -> str:
@@ -122,8 +118,8 @@ def _figure(figsize):
     return fig
 
 
-def chart_figure(path: Path, spec: ChartSpec, rows: list[dict], threshold: float) -> Path:
-    """CV at width per fertilizer (± 2 SE), and each setting against width."""
+def chart_figure(spec: ChartSpec, rows: list[dict], threshold: float) -> bytes:
+    """CV at width per fertilizer (± 2 SE), and each setting against width, as PNG bytes."""
     names = [c for c in columns(rows) if c not in HEAD and c not in TAIL]
     panels = 1 + len(names)
     ncols = min(3, panels)
@@ -153,8 +149,9 @@ def chart_figure(path: Path, spec: ChartSpec, rows: list[dict], threshold: float
     for ax in axes[panels:]:
         ax.set_visible(False)
     fig.suptitle(f"Spreading chart: scene {spec.scene['name']}, {spec.driving}")
-    fig.savefig(path)
-    return path
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    return buffer.getvalue()
 
 
 def cell_picture(spec: ChartSpec, cell: Cell, record: dict) -> bytes:

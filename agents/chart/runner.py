@@ -1,6 +1,12 @@
 """Running a chart's cells: each cell a Ray task (an embedded local Ray, or a cluster
 joined by address), or one after the other in this process.
 
+The embedded Ray is private: without an address a new local instance is started
+(`address="local"`), never a cluster named by RAY_ADDRESS or one already running on the
+machine, with an object store sized to the chart's results; a failed start is one line.
+Everything that can be checked before the work is (the folder, the files to come, the
+address, Ray's start), and a refused run leaves the folder as it was.
+
 Each finished cell is written to the chart folder as it arrives, with its pattern
 picture; a rerun skips the cells already there. Ctrl-C cancels the running tasks and
 stops, keeping every finished cell. The chart files (chart.csv, .json, .md, .png) are
@@ -22,11 +28,14 @@ from spreadgym.agents.chart import outputs
 from spreadgym.agents.chart.search import run_cell
 from spreadgym.agents.chart.spec import Cell, ChartSpec, make_spec
 from spreadgym.agents.chart.store import ChartStore
+from spreadgym.config.base import brief
 from spreadgym.errors import SpreadgymError
 
 ENGINES = ("ray", "local")
 ADDRESS_TIMEOUT_S = 3.0
 WAIT_S = 0.5
+OBJECT_STORE_BASE_BYTES = 80 * 2**20  # Ray's least (75 MiB) and some room
+OBJECT_STORE_PER_WORKER_BYTES = 16 * 2**20  # a cell's record and picture are under 1 MiB; a few wait per worker
 
 
 @dataclass
@@ -46,7 +55,9 @@ def check_address(address: str) -> None:
     hostport = address.split("://", 1)[-1]
     host, sep, port = hostport.rpartition(":")
     if not sep or not port.isdigit() or not host:
-        raise SpreadgymError(f"--address {address!r}: expected HOST:PORT (or ray://HOST:PORT, or auto)")
+        raise SpreadgymError(f"--address {brief(address)}: expected HOST:PORT (or ray://HOST:PORT, or auto)")
+    if not 1 <= int(port) <= 65535:
+        raise SpreadgymError(f"--address {address}: port {port} is out of range; allowed [1, 65535]")
     try:
         socket.create_connection((host, int(port)), timeout=ADDRESS_TIMEOUT_S).close()
     except OSError as exc:
@@ -55,8 +66,9 @@ def check_address(address: str) -> None:
 
 
 def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
-    """Start an embedded local Ray with `workers` CPUs, or join the cluster at `address`;
-    an already running session (the caller's) is used as it is. True if started here."""
+    """Start a private local Ray with `workers` CPUs (never joining RAY_ADDRESS or a running
+    instance), or join the cluster at `address`; an already running session (the
+    caller's) is used as it is. True if started here. A failed start is a SpreadgymError."""
     import ray
 
     if ray.is_initialized():
@@ -67,11 +79,21 @@ def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
         try:
             ray.init(address=address, **quiet)
         except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise SpreadgymError(f"--address {address}: cannot join a Ray cluster there "
-                                 f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
-    else:
-        ray.init(num_cpus=workers or os.cpu_count() or 1, include_dashboard=False, **quiet)
+            raise SpreadgymError(f"--address {address}: cannot join a Ray cluster there ({_first_line(exc)})") from None
+        return True
+    cpus = workers or os.cpu_count() or 1
+    try:
+        ray.init(address="local", num_cpus=cpus, include_dashboard=False,
+                 object_store_memory=OBJECT_STORE_BASE_BYTES + OBJECT_STORE_PER_WORKER_BYTES * cpus, **quiet)
+    except Exception as exc:  # noqa: BLE001 - whatever stops Ray's processes, the user gets one line
+        ray.shutdown()
+        raise SpreadgymError(f"the embedded Ray ({cpus} CPUs) did not start: {_first_line(exc)}") from None
     return True
+
+
+def _first_line(exc: BaseException) -> str:
+    lines = str(exc).strip().splitlines()
+    return brief(lines[0])[1:-1] if lines else type(exc).__name__
 
 
 def cell_with_picture(spec: ChartSpec, cell: Cell) -> tuple[dict, bytes]:
@@ -80,11 +102,10 @@ def cell_with_picture(spec: ChartSpec, cell: Cell) -> tuple[dict, bytes]:
     return record, outputs.cell_picture(spec, cell, record)
 
 
-def _run_ray(spec: ChartSpec, todo: Sequence[Cell], workers: Optional[int], address: Optional[str],
-             finish: Callable[[Cell, dict, bytes], None]) -> None:
+def _run_ray(spec: ChartSpec, todo: Sequence[Cell], finish: Callable[[Cell, dict, bytes], None]) -> None:
+    """The cells of `todo` as tasks of the connected Ray, each finished as it arrives."""
     import ray
 
-    started_here = connect_ray(workers, address)
     pending: dict = {}
     try:
         task = ray.remote(num_cpus=1)(cell_with_picture)
@@ -97,8 +118,6 @@ def _run_ray(spec: ChartSpec, todo: Sequence[Cell], workers: Optional[int], addr
     finally:
         for ref in pending:  # interrupted or failed: stop what is still running
             ray.cancel(ref, force=True)
-        if started_here:
-            ray.shutdown()
 
 
 def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional[int] = None,
@@ -116,15 +135,40 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
         raise SpreadgymError(f"--workers: {workers} must be at least 1")
     if address and engine != "ray":
         raise SpreadgymError("--address needs the ray engine")
+    cpus = os.cpu_count() or 1
+    if workers is not None and workers > cpus and engine == "ray" and not address:
+        raise SpreadgymError(f"--workers: {workers} is more than the {cpus} CPUs here; allowed [1, {cpus}] "
+                             "(join a larger cluster with --address)")
     if address:
         check_address(address)  # before the folder is claimed
     started = time.perf_counter()
     store = ChartStore(out, spec)
-    store.open()
+    store.probe()
+    store.check_manifest()
     records = store.finished()
     reused = list(records)
     todo = [c for c in spec.cells if c.key not in records]
     computed: list[str] = []
+    started_here = bool(todo) and engine == "ray" and connect_ray(workers, address)
+    try:
+        store.open()  # the first write: every refusal came before it
+        _run_cells(spec, store, todo, engine, records, computed, progress, on_cell)
+        ordered = [records[c.key] for c in spec.cells]
+        for cell, record in zip(spec.cells, ordered):
+            if not store.picture_ok(cell):  # interrupted before its picture, or the picture damaged
+                outputs.cell_figure(store, cell, record)
+        files, payload = outputs.write_chart(store, ordered, list(notes))
+    finally:
+        if started_here:
+            import ray
+
+            ray.shutdown()
+    return ChartResult(spec, payload, files, computed, reused, time.perf_counter() - started)
+
+
+def _run_cells(spec: ChartSpec, store: ChartStore, todo: Sequence[Cell], engine: str, records: dict,
+               computed: list[str], progress: bool, on_cell: Optional[Callable[[Cell, dict], None]]) -> None:
+    """Run the cells of `todo`, saving each (record, picture) as it finishes."""
     from tqdm import tqdm
 
     bar = tqdm(total=len(spec.cells), initial=len(records), desc="chart", unit="cell", file=sys.stderr,
@@ -141,18 +185,12 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
 
     try:
         if todo and engine == "ray":
-            _run_ray(spec, todo, workers, address, finish)
+            _run_ray(spec, todo, finish)
         else:
             for cell in todo:
                 finish(cell, *cell_with_picture(spec, cell))
     finally:
         bar.close()
-    ordered = [records[c.key] for c in spec.cells]
-    for cell, record in zip(spec.cells, ordered):
-        if not store.cell_path(cell, ".png").is_file():  # interrupted between a cell's JSON and its picture
-            outputs.cell_figure(store, cell, record)
-    files, payload = outputs.write_chart(store, ordered, list(notes))
-    return ChartResult(spec, payload, files, computed, reused, time.perf_counter() - started)
 
 
 def chart(scene: str, fertilizers, widths, out: Path, driving: Optional[str] = None, budget: int = 200,

@@ -14,8 +14,9 @@ from typing import Optional
 
 import numpy as np
 
+from spreadgym.config.base import brief
 from spreadgym.config.materials import MaterialLibrary, load_library
-from spreadgym.config.scene import Scene, load_scene, scene_from_dict, scene_with
+from spreadgym.config.scene import Scene, bout_trays, check_pooled_work, load_scene, scene_from_dict, scene_with
 from spreadgym.config.settings import SettingsSpace
 from spreadgym.errors import ConfigError, MaterialError, SpreadgymError
 from spreadgym.physics.contacts import resolve_contacts
@@ -28,6 +29,9 @@ VERIFY_RUNS = 8  # independent runs pooled for the verification (x the granules 
 PROBE_GRANULES = 256  # per probe of the reach check
 PROBE_MODEL = "analytic"
 MAX_PROBES = 32
+MAX_BUDGET = 100_000  # simulations per cell: days of work already; beyond it only memory runs out
+MAX_WIDTHS = 2000  # every multiple of the finest tray (0.05 m) up to 100 m
+MAX_WIDTH_M = 100.0
 
 
 @dataclass(frozen=True)
@@ -84,26 +88,50 @@ def cell_seed(base_seed: int, cell: Cell) -> np.random.SeedSequence:
 
 
 def parse_widths(text: str) -> tuple[float, ...]:
-    """`W1,W2,...` or `LO:HI:STEP` (HI included when the steps reach it), in metres."""
+    """`W1,W2,...` or `LO:HI:STEP` (HI included when the steps reach it), in metres; at most
+    `MAX_WIDTHS` widths, counted before any is built."""
     text = text.strip()
+    sep = ":" if ":" in text else ","
+    if text.count(sep) >= MAX_WIDTHS:
+        raise SpreadgymError(f"--widths: {text.count(sep) + 1} widths given; allowed: at most {MAX_WIDTHS}")
     try:
-        parts = [float(p) for p in text.split(":" if ":" in text else ",")]
+        parts = [float(p) for p in text.split(sep)]
     except ValueError:
         parts = []
-    if not parts or (":" in text and len(parts) != 3):
-        raise SpreadgymError(f"--widths {text!r}: expected W1,W2,... or LO:HI:STEP in metres")
-    if ":" in text:
+    if not parts or (sep == ":" and len(parts) != 3):
+        raise SpreadgymError(f"--widths {brief(text)}: expected W1,W2,... or LO:HI:STEP in metres")
+    if sep == ":":
         lo, hi, step = parts
         if not all(math.isfinite(v) for v in parts) or step <= 0 or hi < lo:
             raise SpreadgymError(f"--widths {text}: LO:HI:STEP needs LO <= HI and STEP > 0")
-        count = int(math.floor((hi - lo) / step + 1e-9)) + 1
+        count = math.floor((hi - lo) / step + 1e-9) + 1
+        if count > MAX_WIDTHS:
+            raise SpreadgymError(f"--widths {text}: {count:g} widths; allowed: at most {MAX_WIDTHS} "
+                                 "(a larger STEP or a shorter range)")
         widths = [round(lo + i * step, 9) for i in range(count)]
     else:
         widths = parts
-    for w in widths:
-        if not (math.isfinite(w) and 0.0 < w <= 100.0):
-            raise SpreadgymError(f"--widths: {w:g} m is out of range; allowed (0, 100] m")
     return tuple(dict.fromkeys(widths))
+
+
+def check_widths(widths_m: tuple[float, ...], tray_width_m: float) -> None:
+    """Each width in (0, 100] m, on the tray grid and at least two trays, and one cell file
+    per width (no two widths that agree to the millimetre of the cell key)."""
+    if len(widths_m) > MAX_WIDTHS:
+        raise SpreadgymError(f"--widths: {len(widths_m)} widths; allowed: at most {MAX_WIDTHS}")
+    keys: dict[str, float] = {}
+    for w in widths_m:
+        if not (math.isfinite(w) and 0.0 < w <= MAX_WIDTH_M):
+            raise SpreadgymError(f"--widths: {w:g} m is out of range; allowed (0, {MAX_WIDTH_M:g}] m")
+        try:
+            bout_trays(w, tray_width_m)
+        except ValueError as exc:
+            raise SpreadgymError(f"--widths: {exc}") from None
+        key = Cell("", w).key
+        if key in keys:
+            raise SpreadgymError(f"--widths: {keys[key]!r} m and {w!r} m are one width to the millimetre (one "
+                                 "cell file); give each width once")
+        keys[key] = w
 
 
 def resolve_fertilizers(text_or_names, scene: Scene, library: MaterialLibrary) -> tuple[tuple[str, ...], list[str]]:
@@ -113,6 +141,9 @@ def resolve_fertilizers(text_or_names, scene: Scene, library: MaterialLibrary) -
     names = [n.strip() for n in names if n.strip()]
     if not names:
         raise SpreadgymError("--fertilizers: give at least one fertilizer or 'all'")
+    if "all" in names and names != ["all"]:
+        raise SpreadgymError("--fertilizers: 'all' stands alone (every fertilizer with measured pairs on the "
+                             "scene); give all, or names without it")
     notes = []
     if names == ["all"]:
         chosen = []
@@ -128,7 +159,7 @@ def resolve_fertilizers(text_or_names, scene: Scene, library: MaterialLibrary) -
     for name in names:
         if name not in library.fertilizers:
             known = ", ".join(library.fertilizers)
-            raise SpreadgymError(f"--fertilizers: unknown fertilizer {name!r}; known: {known}, all")
+            raise SpreadgymError(f"--fertilizers: unknown fertilizer {brief(name)}; known: {known} (or all alone)")
         try:
             resolve_contacts(scene_with(scene, {"fertilizer": name}), library)
         except MaterialError as exc:
@@ -145,8 +176,8 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
     the scene can throw, budget or granules below 1, settings ranges out of bounds."""
     library = library or load_library()
     base = load_scene(scene)
-    if int(budget) < 1:
-        raise SpreadgymError(f"--budget: {budget} must be at least 1 simulation")
+    if not 1 <= int(budget) <= MAX_BUDGET:
+        raise SpreadgymError(f"--budget: {budget} is out of range; allowed [1, {MAX_BUDGET}] simulations")
     if int(seed) < 0:
         raise SpreadgymError(f"--seed: {seed} must be >= 0")
     granules = base.sim.granules if granules is None else int(granules)
@@ -161,19 +192,19 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
     if driving not in ("racetrack", "back-and-forth"):
         raise SpreadgymError(f"--driving: {driving!r}; allowed: racetrack, back-and-forth")
     names, notes = resolve_fertilizers(fertilizers, base, library)
-    widths_m = parse_widths(widths) if isinstance(widths, str) else tuple(float(w) for w in widths)
+    widths_m = parse_widths(widths) if isinstance(widths, str) else tuple(dict.fromkeys(float(w) for w in widths))
     if not widths_m:
         raise SpreadgymError("--widths: give at least one width")
+    check_widths(widths_m, base.pattern.tray_width_m)
     spec = ChartSpec(base.model_dump(mode="json"), names, tuple(sorted(widths_m)), driving, int(budget), granules,
                      int(seed), search_model, verify_model, int(verify_runs), settings)
-    for w in spec.widths_m:
-        try:
-            spec.cell_scene(Cell(names[0], w))
-        except ConfigError as exc:
-            if exc.key == "pattern.target_swath_m":
-                raise SpreadgymError(f"--widths: {w:g} m is off the tray grid: widths must be multiples of "
-                                     f"the tray width {base.pattern.tray_width_m:g} m") from None
-            raise
+    try:
+        scene = spec.cell_scene(spec.cells[0])
+        check_pooled_work(scene, spec.verify_runs, "--granules")
+    except ConfigError as exc:
+        if exc.key == "sim.granules":
+            raise SpreadgymError(f"--granules: {exc.message}") from None
+        raise
     space = spec.space(spec.cell_scene(spec.cells[0]))
     for name in names:
         reach = widest_pattern_m(spec, space, name, library)

@@ -5,28 +5,48 @@ granules, seed, models); DIR/cells/<key>.json holds one finished cell. Every fil
 written whole or not at all (a temporary file renamed over the target), so an
 interrupted chart leaves only finished cells. A folder whose manifest differs from the
 spec being run is refused, naming what changed, rather than mixing two charts.
+
+A cell file is reused only when it is the record of its cell (`record_problem`: the
+schema, the cell's fertilizer, width and driving, finite values in their ranges, the
+settings matching their unit vector); any other file there is recomputed and replaced.
+Before any work, `probe` refuses a folder where a file due after the work could not be
+written, so no computed cell is lost to a folder that cannot take it.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
+import tempfile
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 from spreadgym.agents.chart.spec import Cell, ChartSpec
+from spreadgym.config.base import brief
 from spreadgym.errors import SpreadgymError
 from spreadgym.report import print_json
 
 MANIFEST = "manifest.json"
 CELLS = "cells"
+CHART_FILES = ("chart.csv", "chart.json", "chart.md", "chart.png")
+HEAD = ["fertilizer", "width_m", "driving"]  # a row: the cell, its settings (units in their names), the results
+TAIL = ["cv_percent", "cv_standard_error_percent", "effective_swath_m", "cv_search_percent", "simulations", "wall_s"]
+DETAIL = {"key", "unit_settings", "cv_search_standard_error_percent", "search_evaluations", "rescores",
+          "search_agrees_within_2se", "meets_threshold", "verification", "trays", "cv_curve"}
+PNG_START, PNG_END = b"\x89PNG\r\n\x1a\n", b"IEND\xaeB`\x82"
+
+
+def partial_path(path: Path) -> Path:
+    """Where `write_atomic` writes `path` before renaming it."""
+    return path.with_name(f".{path.name}.partial")
 
 
 def write_atomic(path: Path, content: str | bytes) -> Path:
     """Write `content` (text as UTF-8, or bytes) to `path` whole: a temporary file beside
     it, renamed over it."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(f".{path.name}.partial")
+    partial = partial_path(path)
     data = content.encode("utf-8") if isinstance(content, str) else content
     with open(partial, "wb") as handle:
         handle.write(data)
@@ -56,7 +76,7 @@ def _changes(stored: dict, wanted: dict) -> list[str]:
             if key == "scene":
                 changed.append("the scene")
             else:
-                changed.append(f"{key} {stored.get(key)!r} -> {wanted.get(key)!r}")
+                changed.append(f"{key} {brief(stored.get(key))} -> {brief(wanted.get(key))}")
     return changed
 
 
@@ -74,27 +94,52 @@ class ChartStore:
     def cell_path(self, cell: Cell, suffix: str = ".json") -> Path:
         return self.cells_dir / f"{cell.key}{suffix}"
 
-    def open(self) -> None:
-        """Claim the folder for this spec: write the manifest, or check the one there."""
+    def probe(self) -> None:
+        """Refuse, writing nothing, a folder where a file of the chart could not be written:
+        the folders (or the nearest one that exists) must take a file, and no file of the
+        chart may be a folder."""
+        existing = next(p for p in (self.out, *self.out.parents) if p.exists() or p == p.parent)
+        for folder in dict.fromkeys((self.cells_dir, existing) if self.cells_dir.exists() else (existing,)):
+            if not folder.is_dir():
+                raise SpreadgymError(f"--out {self.out}: {folder} is a file, not a folder")
+            try:
+                with tempfile.TemporaryFile(dir=folder):
+                    pass
+            except OSError as exc:
+                raise SpreadgymError(f"--out {self.out}: cannot write in {folder} "
+                                     f"({exc.strerror or type(exc).__name__})") from None
+        files = [self.out / MANIFEST, *(self.out / name for name in CHART_FILES)]
+        files += [self.cell_path(cell, suffix) for cell in self.spec.cells for suffix in (".json", ".png")]
+        for path in files:
+            for target in (path, partial_path(path)):
+                if target.is_dir():
+                    raise SpreadgymError(f"--out {self.out}: {target} is a folder where the chart writes a file; "
+                                         "remove it or use another --out")
+
+    def check_manifest(self) -> None:
+        """Refuse, writing nothing, a folder that holds another chart (or cells without a manifest)."""
         wanted = _plain(self.spec.manifest())
         path = self.out / MANIFEST
         if path.exists():
             try:
                 stored = json.loads(path.read_text(encoding="utf-8"))
             except (OSError, ValueError) as exc:
-                raise SpreadgymError(f"--out {self.out}: {MANIFEST} is unreadable ({exc}); "
+                raise SpreadgymError(f"--out {self.out}: {MANIFEST} is unreadable ({brief(str(exc))[1:-1]}); "
                                      "use another folder or remove it") from None
             changed = _changes(stored, wanted) if isinstance(stored, dict) else ["the manifest"]
             if changed:
                 raise SpreadgymError(f"--out {self.out} holds a chart of other settings ({'; '.join(changed)}); "
                                      "rerun with the same scene and flags to resume, or use another --out")
-            return
-        if self.cells_dir.is_dir() and any(self.cells_dir.glob("*.json")):
+        elif self.cells_dir.is_dir() and any(self.cells_dir.glob("*.json")):
             raise SpreadgymError(f"--out {self.out}: cells/ has results but no {MANIFEST}; use another folder")
-        write_atomic(path, json_text(wanted))
+
+    def open(self) -> None:
+        """Claim the folder for this spec (after `check_manifest`): write the manifest if missing."""
+        if not (self.out / MANIFEST).exists():
+            write_atomic(self.out / MANIFEST, json_text(_plain(self.spec.manifest())))
 
     def finished(self) -> dict[str, dict]:
-        """key -> stored cell, for every cell of the spec that has a complete file."""
+        """key -> stored cell, for every cell of the spec whose file is its record."""
         done = {}
         for cell in self.spec.cells:
             record = self.load(cell)
@@ -103,14 +148,77 @@ class ChartStore:
         return done
 
     def load(self, cell: Cell) -> Optional[dict]:
+        """The cell's stored record, or None where there is none or the file is not its record
+        (the cell is then run again and the file replaced)."""
         path = self.cell_path(cell)
         if not path.is_file():
             return None
         try:
             record = json.loads(path.read_text(encoding="utf-8"))
-        except ValueError:
-            return None  # not ours to trust: the cell is run again and the file replaced
-        return record if isinstance(record, dict) and "row" in record else None
+        except (OSError, ValueError):
+            return None
+        return record if record_problem(self.spec, cell, record) is None else None
+
+    def picture_ok(self, cell: Cell) -> bool:
+        """Whether the cell's picture is a whole PNG file (else it is drawn again)."""
+        path = self.cell_path(cell, ".png")
+        try:
+            with open(path, "rb") as handle:
+                start = handle.read(len(PNG_START))
+                handle.seek(max(0, path.stat().st_size - len(PNG_END)))
+                return start == PNG_START and handle.read() == PNG_END
+        except OSError:
+            return False
 
     def save(self, cell: Cell, record: dict) -> Path:
         return write_atomic(self.cell_path(cell), json_text(record))
+
+
+def _real(value: Any, low: float = -math.inf, high: float = math.inf) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            and low <= value <= high)
+
+
+def _reals(values: Any, low: float = -math.inf) -> bool:
+    return isinstance(values, list) and all(_real(v, low) for v in values)
+
+
+def record_problem(spec: ChartSpec, cell: Cell, record: Any) -> Optional[str]:
+    """Why `record` is not a finished record of `cell` in `spec`, or None when it is."""
+    if not (isinstance(record, dict) and set(record) == {"row", "detail"} and isinstance(record["row"], dict)
+            and isinstance(record["detail"], dict)):
+        return "not a cell record ({row, detail})"
+    row, detail = record["row"], record["detail"]
+    space = spec.space(spec.cell_scene(cell))
+    if list(row) != HEAD + space.names + TAIL or set(detail) != DETAIL:
+        return "its columns are not the chart's"
+    if (row["fertilizer"], row["width_m"], row["driving"], detail["key"]) != (
+            cell.fertilizer, cell.width_m, spec.driving, cell.key):
+        return "it is another cell's"
+    unit = detail["unit_settings"]
+    if not (_reals(unit) and len(unit) == space.size and all(-1.0 <= u <= 1.0 for u in unit)):
+        return "its unit settings are not in the box"
+    if space.values(unit) != {name: row[name] for name in space.names}:
+        return "its settings do not match its unit settings"
+    optional = ("cv_percent", "cv_standard_error_percent", "cv_search_percent")
+    if not all(row[k] is None or _real(row[k], 0.0) for k in optional):
+        return "a CV is not a finite number >= 0"
+    if not all(_real(row[k], 0.0) for k in ("effective_swath_m", "wall_s")):
+        return "a result is not a finite number >= 0"
+    if not (isinstance(row["simulations"], int) and spec.verify_runs < row["simulations"]
+            <= spec.budget + spec.verify_runs):
+        return "its simulation count is not the spec's"
+    trays, curve = detail["trays"], detail["cv_curve"]
+    if not (isinstance(trays, dict) and _reals(trays.get("center_m")) and _reals(trays.get("mass_kg"), 0.0)
+            and len(trays["center_m"]) == len(trays["mass_kg"]) > 0):
+        return "its trays are not finite"
+    if not (isinstance(curve, dict) and _reals(curve.get("bout_width_m"), 0.0)
+            and isinstance(curve.get("cv_percent"), list)
+            and all(v is None or _real(v, 0.0) for v in curve["cv_percent"])
+            and len(curve["bout_width_m"]) == len(curve["cv_percent"])):
+        return "its CV curve is not finite"
+    verification = detail["verification"]
+    if not (isinstance(verification, dict) and isinstance(verification.get("model"), str)
+            and isinstance(verification.get("granules"), int)):
+        return "its verification is not recorded"
+    return None

@@ -14,6 +14,7 @@ DRIVING = ("racetrack", "back-and-forth")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
+    from spreadgym.agents.chart.spec import MAX_BUDGET
 
     parser.add_argument("--scene", required=True, metavar="S", help="shipped scene name or a YAML path")
     parser.add_argument("--fertilizers", required=True, metavar="F1,F2|all",
@@ -21,18 +22,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--widths", required=True, metavar="W1,W2,...|LO:HI:STEP",
                         help="working widths in metres, multiples of the scene's tray width")
     parser.add_argument("--driving", choices=DRIVING, help="driving pattern (default: the scene's)")
-    parser.add_argument("--budget", type=arguments.COUNT, default=DEFAULT_BUDGET, metavar="N",
+    parser.add_argument("--budget", type=arguments.integer(1, MAX_BUDGET), default=DEFAULT_BUDGET, metavar="N",
                         help=f"fast-model simulations per cell for the search (default {DEFAULT_BUDGET})")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
                         help="granules per simulation, search and verification runs alike (default: the scene's)")
     parser.add_argument("--seed", type=arguments.SEED, default=0,
                         help="base seed; each cell's seeds derive from it and the cell (default 0)")
     parser.add_argument("--workers", type=arguments.COUNT, metavar="N",
-                        help=f"CPUs of the embedded local Ray (default: all, {os.cpu_count()} here)")
+                        help=f"CPUs of the embedded (private) local Ray (default: all, {os.cpu_count()} here)")
     parser.add_argument("--address", metavar="ADDR",
-                        help="join the Ray cluster at ADDR (HOST:PORT, ray://HOST:PORT or auto) instead")
-    parser.add_argument("--out", type=arguments.output_folder, default=Path("out/chart"), metavar="DIR",
-                        help="chart folder; rerunning the same command resumes it (default out/chart)")
+                        help="join the Ray cluster at ADDR (HOST:PORT, ray://HOST:PORT or auto) instead; "
+                             "without it no cluster is joined, RAY_ADDRESS included")
+    parser.add_argument("--out", type=Path, default=Path("out/chart"), metavar="DIR",
+                        help="chart folder, created when the chart starts; rerunning the same command resumes it "
+                             "(default out/chart)")
     parser.add_argument("--json", action="store_true", help="print chart.json on stdout")
 
 

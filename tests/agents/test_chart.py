@@ -3,11 +3,14 @@ resume after an interruption, refusal of a changed chart, and bad input."""
 
 import csv
 import json
+import math
+import shutil
 
 import pytest
 
 from spreadgym.agents.chart import make_spec, run_chart
 from spreadgym.agents.chart.spec import cell_seed
+from spreadgym.agents.chart.store import ChartStore, record_problem
 from spreadgym.cli.main import main
 from spreadgym.config.resources import resolve_named
 from spreadgym.config.scene import scene_with
@@ -17,6 +20,7 @@ from spreadgym.spread.reference import pool_runs, reference_from
 FERTILIZER = "compound-10-16-10"
 # Small and fast: the closed form searches (drop 0 makes it exact for this scene), the
 # full model verifies with 2 pooled runs.
+KEYS = ["compound-10-16-10_003000mm", "compound-10-16-10_004000mm"]
 SMALL = dict(budget=6, granules=64, search_model="analytic", verify_runs=2)
 COLUMNS = ["fertilizer", "width_m", "driving", "rpm", "pitch_deg", "cv_percent", "cv_standard_error_percent",
            "effective_swath_m", "cv_search_percent", "simulations", "wall_s"]
@@ -142,6 +146,13 @@ BASE = ["chart", "--scene", "paper", "--fertilizers", FERTILIZER, "--widths", "3
     (["--driving", "spiral"], "--driving: invalid choice"),
     (["--address", "127.0.0.1:1"], "--address 127.0.0.1:1: no Ray cluster reachable"),
     (["--address", "nowhere"], "expected HOST:PORT"),
+    (["--address", "127.0.0.1:99999"], "port 99999 is out of range; allowed [1, 65535]"),
+    (["--widths", "3,3.000000002"], "3.0 m and 3.000000002 m are one width to the millimetre"),
+    (["--widths", "0.5"], "--widths: 0.5 m is narrower than 2 trays of 0.5 m"),
+    (["--widths", "1e-10"], "--widths: 1e-10 m is narrower than 2 trays"),
+    (["--fertilizers", "all,pellet"], "--fertilizers: 'all' stands alone"),
+    (["--granules", "100000"], "--granules: 8 runs x 3200000 landing points per run"),
+    (["--workers", "100000"], "--workers: 100000 is more than the"),
 ])
 def test_bad_input_is_one_line_and_exit_2_with_nothing_written(argv, message, tmp_path, capsys):
     out = tmp_path / "out"
@@ -152,9 +163,96 @@ def test_bad_input_is_one_line_and_exit_2_with_nothing_written(argv, message, tm
         code = exc.code
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
-    assert message in err[-1]
-    assert not (out / "chart.csv").exists() and not (out / "cells").exists()
-    assert not (out / "manifest.json").exists()
+    assert message in err[-1] and "Traceback" not in "".join(err)
+    assert not out.exists()  # not even an empty folder
+
+
+def _records(out):
+    return [json.loads((out / "cells" / f"{key}.json").read_text(encoding="utf-8")) for key in KEYS]
+
+
+def _edited(record, **row):
+    edited = json.loads(json.dumps(record))
+    edited["row"].update(row)
+    return edited
+
+
+def test_a_cell_file_is_reused_only_when_it_is_the_record_of_its_cell(chart):
+    out, result = chart
+    spec = result.spec
+    first, second = _records(out)
+    assert record_problem(spec, spec.cells[0], first) is None and record_problem(spec, spec.cells[1], second) is None
+    wrong = {
+        "no row": {"row": {}},
+        "not a mapping": [1, 2],
+        "another cell's": second,
+        "width 77 m": _edited(first, width_m=77.0),
+        "rpm -5": _edited(first, rpm=-5.0),
+        "CV NaN": _edited(first, cv_percent=math.nan),
+        "CV a string": _edited(first, cv_percent="9"),
+        "a column more": _edited(first, extra=1),
+        "settings off their unit vector": _edited(first, pitch_deg=first["row"]["pitch_deg"] + 1e-9),
+        "simulations": _edited(first, simulations=10**9),
+    }
+    for name, record in wrong.items():
+        assert record_problem(spec, spec.cells[0], record) is not None, name
+
+
+def test_a_damaged_folder_is_repaired_not_trusted(chart, tmp_path):
+    """A cell file that is not its cell's is recomputed, a damaged picture redrawn; the chart
+    comes out as the undamaged one."""
+    source, full = chart
+    out = tmp_path / "damaged"
+    shutil.copytree(source, out)
+    (out / "cells" / f"{KEYS[0]}.json").write_text(json.dumps(_edited(_records(source)[0], width_m=77.0)))
+    (out / "cells" / f"{KEYS[1]}.png").write_bytes(b"\x89PNG\r\n\x1a\n not a picture")
+    result = run_chart(small_spec(), out, engine="local", progress=False)
+    assert result.computed == [KEYS[0]] and result.reused == [KEYS[1]]
+    assert without_wall(result.payload["rows"]) == without_wall(full.payload["rows"])
+    assert ChartStore(out, result.spec).picture_ok(result.spec.cells[1])
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda out: (out / "cells" / f"{KEYS[1]}.json").mkdir(parents=True), f"{KEYS[1]}.json is a folder"),
+    (lambda out: (out / "cells" / f".{KEYS[1]}.png.partial").mkdir(parents=True), "png.partial is a folder"),
+    (lambda out: (out / "chart.json").mkdir(parents=True), "chart.json is a folder"),
+    (lambda out: out.mkdir() or (out / "cells").write_text("x"), "cells is a file, not a folder"),
+])
+def test_a_file_the_chart_writes_after_the_work_is_probed_before_it(damage, message, tmp_path):
+    out = tmp_path / "chart"
+    damage(out)
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+
+    def never(cell, record):
+        raise AssertionError("a cell ran before the folder was checked")
+
+    with pytest.raises(SpreadgymError, match=message.replace(".", r"\.")):
+        run_chart(small_spec(), out, engine="local", progress=False, on_cell=never)
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before  # nothing written
+
+
+def test_the_embedded_ray_is_private_and_a_failed_start_is_one_line(monkeypatch):
+    """Without --address a new local instance is started whatever RAY_ADDRESS says, its
+    object store sized to the workers; a start that fails is a SpreadgymError of one line."""
+    import ray
+
+    from spreadgym.agents.chart.runner import connect_ray
+
+    calls = []
+
+    def init(**kwargs):
+        calls.append(kwargs)
+        raise RuntimeError("node timed out during startup\nTraceback ...")
+
+    monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:1")
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", init)
+    monkeypatch.setattr(ray, "shutdown", lambda: None)
+    with pytest.raises(SpreadgymError) as refused:
+        connect_ray(2, None)
+    assert calls[0]["address"] == "local" and calls[0]["num_cpus"] == 2
+    assert 75 * 2**20 <= calls[0]["object_store_memory"] <= 256 * 2**20
+    assert str(refused.value) == "the embedded Ray (2 CPUs) did not start: node timed out during startup"
 
 
 def test_the_search_objective_charges_mass_that_missed_the_trays():

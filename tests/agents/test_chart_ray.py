@@ -2,6 +2,7 @@
 chart, row for row, in this process and on a three-node cluster (one machine)."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -19,11 +20,14 @@ def without_wall(rows):
 
 
 def test_cli_end_to_end_on_an_embedded_two_cpu_ray(tmp_path):
+    """With RAY_ADDRESS naming a cluster that is not there, the chart still starts its own
+    private Ray: it joins nothing it was not asked to."""
     out = tmp_path / "chart"
     argv = [sys.executable, "-m", "spreadgym.cli.main", "chart", "--scene", "paper", "--fertilizers",
             "compound-10-16-10,pellet", "--widths", "3,4", "--budget", "1", "--granules", "64", "--workers", "2",
             "--out", str(out), "--json"]
-    proc = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    env = {**os.environ, "RAY_ADDRESS": "127.0.0.1:1"}
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 0, proc.stderr
     payload = json.loads(proc.stdout)
     assert [(r["fertilizer"], r["width_m"]) for r in payload["rows"]] == [
