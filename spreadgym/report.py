@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
-from typing import Any, Sequence
+from typing import Any, Optional, Sequence
 
 
 def _jsonable(value: Any) -> Any:
@@ -42,3 +42,20 @@ def format_table(rows: Sequence[Sequence[Any]], header: Sequence[str]) -> str:
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in text]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+def decimals_supported(error: float) -> int:
+    """Decimals that a standard error supports: its first significant digit's place (the
+    error rounded to one significant digit first, so 0.096 reads as 0.1)."""
+    if not (math.isfinite(error) and error > 0):
+        return 1
+    rounded = float(f"{error:.0e}")
+    return max(0, -math.floor(math.log10(rounded)))
+
+
+def with_error(value: float, error: Optional[float], unit: str = "") -> str:
+    """'7.4 +- 0.2 %': the value with no more digits than its standard error supports
+    (one decimal where no error is known)."""
+    places = decimals_supported(error) if error is not None else 1
+    shown = f"{value:.{places}f}" + (f" +- {error:.{places}f}" if error is not None else "")
+    return f"{shown} {unit}".rstrip()

@@ -1,4 +1,9 @@
-"""`spreadgym simulate`: run one scene end to end and report the spread pattern."""
+"""`spreadgym simulate`: run one scene end to end and report the spread pattern.
+
+Runs of the scene are pooled until the CV at the target width has the standard error
+asked for (`--precision`, spread.precision), and what is printed shows no more digits
+than that standard error supports.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +12,22 @@ import sys
 
 from spreadgym.cli import arguments
 from spreadgym.config.overrides import parse_assignments
-from spreadgym.report import format_table, print_json
+from spreadgym.report import format_table, print_json, with_error
+from spreadgym.spread.precision import SIMULATE_MAX_RUNS, SIMULATE_PRECISION_PP, check_precision
+
+MAX_RUNS_LIMIT = 4096
+
+
+def precision_flag(text: str) -> float:
+    """`--precision PP`: a standard error in percentage points (argparse names the flag)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    try:
+        return check_precision(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--precision: ")) from None
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -17,6 +37,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key, VALUE parsed as YAML (e.g. spinner.rpm=800, deflectors=[])")
     parser.add_argument("--model", default="auto", choices=MODELS, help="spinner model (default: auto)")
+    parser.add_argument("--precision", type=precision_flag, default=SIMULATE_PRECISION_PP, metavar="PP",
+                        help="standard error wanted for the CV at the target width, in percentage points: runs "
+                             f"are pooled until it is reached (default {SIMULATE_PRECISION_PP:g})")
+    parser.add_argument("--max-runs", type=arguments.integer(2, MAX_RUNS_LIMIT), default=SIMULATE_MAX_RUNS,
+                        metavar="N", help=f"at most N runs of sim.granules each (default {SIMULATE_MAX_RUNS})")
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
     parser.add_argument("--plot", type=arguments.output_folder, metavar="DIR", help="write PNG pictures into DIR")
 
@@ -25,51 +50,59 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from spreadgym.config.scene import load_scene
-    from spreadgym.spread.pipeline import run_scene
+    from spreadgym.spread.precision import simulate_precisely
 
     scene = load_scene(args.scene, parse_assignments(args.overrides))
-    with tqdm(desc="spinner", unit="ms", file=sys.stderr, disable=None, leave=False,
-              bar_format="{desc}: {n:.0f} ms simulated [{elapsed}]") as bar:
-        def progress(t_s: float) -> None:
-            bar.n = 1e3 * t_s
-            bar.refresh() if int(bar.n) % 10 == 0 else None
-
-        result = run_scene(scene, model=args.model, progress=progress, tracks=30 if args.plot else 0)
+    with tqdm(desc="runs", unit="run", file=sys.stderr, disable=None, leave=False) as bar:
+        precise = simulate_precisely(scene, args.precision, args.max_runs, model=args.model,
+                                     tracks=30 if args.plot else 0, progress=lambda done, _cap: bar.update(1))
     written = []
     if args.plot:
         from spreadgym.viz.plots import write_simulation_plots
 
-        written = write_simulation_plots(result, args.plot)
+        written = write_simulation_plots(precise.as_result(), args.plot)
+    payload = precise.to_json()
     if args.json:
-        print_json(result.metrics.to_json())
+        print_json(payload)
     else:
-        print(summary(result.metrics.to_json(), scene.name))
+        print(summary(payload, scene.name))
         for path in written:
             print(f"wrote {path}")
     return 0
 
 
-def summary(m: dict, scene_name: str) -> str:
-    """The headline numbers of a run, for people."""
-    d = m["departure"]
-    cv = m["cv_percent_at_target"]
-    ci = m["cv_ci_percent"]
-    rows = [
-        ("model", f"{m['model']} ({m['model_reason']})"),
-        ("time step", f"{m['dt_s']:.3g} s" if m["dt_s"] else "closed form"),
-        ("granules", f"{m['granules']} ({m['outcomes']['departed']} departed)"),
-        ("release angles", f"{m['angle_copies']} per granule ({m['angle_copies_reason']})"),
+def _departure_rows(d: dict) -> list[tuple[str, str]]:
+    if d["speed_mean_m_s"] is None:
+        return [("departure", "no granule left the spinner")]
+    return [
         ("departure speed", f"{d['speed_mean_m_s']:.2f} +- {d['speed_std_m_s']:.2f} m/s"),
         ("departure angle", f"{d['angle_mean_deg']:.1f} deg from the tangent"),
         ("granule spin", f"{d['spin_mean_rad_s']:.0f} rad/s"),
         ("time on spinner", f"{1e3 * d['time_on_spinner_mean_s']:.1f} ms"),
+    ]
+
+
+def summary(m: dict, scene_name: str) -> str:
+    """The headline numbers of a run, for people: the CV to the digits its standard error supports."""
+    cv, se = m["cv_percent_at_target"], m["cv_standard_error_percent"]
+    mass = m["mass"]
+    precision = (f"standard error {m['precision_percent']:g} pp asked, "
+                 + ("reached" if m["precision_met"] else "not reached" if se is not None else "none known")
+                 + f" in {m['runs']} run(s)")
+    rows = [
+        ("model", f"{m['model']} ({m['model_reason']})"),
+        ("time step", f"{m['dt_s']:.3g} s" if m["dt_s"] else "closed form"),
+        ("granules", f"{m['granules_simulated']} in {m['runs']} run(s) ({m['outcomes']['departed']} departed)"),
+        ("release angles", f"{m['angle_copies']} per granule ({m['angle_copies_reason']})"),
+        *_departure_rows(m["departure"]),
         ("CV at target", "nothing landed" if cv is None else
-         f"{cv:.1f} % at {m['target_swath_m']:g} m ({m['driving']})"
-         + (f", 95 % CI {ci[0]:.1f}-{ci[1]:.1f} %" if ci else "")),
+         f"{with_error(cv, se, '%')} at {m['target_swath_m']:g} m ({m['driving']})"),
+        ("precision", precision),
         ("effective swath", f"{m['effective_swath_m']:g} m (CV <= {m['cv_threshold_percent']:g} %)"),
-        ("mass", f"released {1e3 * m['mass']['released_kg']:.2f} g, landed {1e3 * m['mass']['landed_kg']:.2f} g, "
-                 f"retained {1e3 * m['mass']['retained_kg']:.2f} g"
-                 + (f", intercepted {1e3 * m['mass']['intercepted_kg']:.2f} g" if m['mass']['intercepted_kg'] else "")),
+        ("mass", f"released {1e3 * mass['released_kg']:.2f} g, landed {1e3 * mass['landed_kg']:.2f} g, "
+                 f"retained {1e3 * mass['retained_kg']:.2f} g"
+                 + (f", intercepted {1e3 * mass['intercepted_kg']:.2f} g" if mass['intercepted_kg'] else "")),
         ("wall time", f"{m['wall_s']:.2f} s"),
     ]
-    return f"scene {scene_name}\n" + format_table(rows, ("quantity", "value"))
+    notes = [("note", text) for text in m["notes"]]
+    return f"scene {scene_name}\n" + format_table(rows + notes, ("quantity", "value"))

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Optional
 
 import numpy as np
@@ -126,32 +126,29 @@ class PreciseEstimate:
         se = self.at_target.standard_error_percent
         return se is not None and se <= self.precision_pp
 
-    def to_json(self) -> dict:
-        """`spreadgym simulate --json`: the run's keys with the pooled pattern's figures."""
+    def as_result(self) -> SimulationResult:
+        """Run 0 (granules, paths, landings for pictures) carrying the pooled trays and figures."""
         m = self.first.metrics
-        out = m.to_json()
         notes = list(m.notes)
         if not self.precision_met and self.at_target.standard_error_percent is not None:
             notes.append(f"standard error {self.at_target.standard_error_percent:.2g} pp after the cap of "
                          f"{self.max_runs} runs: above the {self.precision_pp:g} pp asked")
-        out.update({
-            "granules_simulated": self.granules_simulated,
-            "runs": self.runs,
-            "precision_percent": self.precision_pp,
-            "precision_met": self.precision_met,
-            "outcomes": self.outcomes,
-            "cv_percent_at_target": self.at_target.cv_percent,
-            "cv_standard_error_percent": self.at_target.standard_error_percent,
-            "cv_raw_percent": self.at_target.raw_percent,
-            "cv_ci_percent": None if self.at_target.interval_percent is None else list(self.at_target.interval_percent),
-            "effective_swath_m": self.effective_swath_m,
-            "cv_curve": {"bout_width_m": self.widths_m, "cv_percent": self.cv_percent},
-            "trays": {"center_m": self.trays.center_m, "mass_kg": self.trays.mass_kg},
-            "mass": {"released_kg": self.released_kg, "landed_kg": self.trays.total_kg,
-                     "retained_kg": self.retained_kg, "intercepted_kg": self.intercepted_kg},
-            "notes": notes,
-            "wall_s": self.wall_s,
-        })
+        interval = self.at_target.interval_percent
+        metrics = replace(
+            m, outcomes=self.outcomes, cv_percent_at_target=self.at_target.cv_percent,
+            cv_standard_error_percent=self.at_target.standard_error_percent, cv_raw_percent=self.at_target.raw_percent,
+            cv_ci_percent=None if interval is None else list(interval), effective_swath_m=self.effective_swath_m,
+            curve_bout_width_m=self.widths_m, curve_cv_percent=self.cv_percent, trays=self.trays,
+            released_kg=self.released_kg, retained_kg=self.retained_kg, intercepted_kg=self.intercepted_kg,
+            notes=notes, wall_s=self.wall_s)
+        return replace(self.first, trays=self.trays, replicate_masses_kg=self.masses, metrics=metrics)
+
+    def to_json(self) -> dict:
+        """`spreadgym simulate --json`: a run's keys with the pooled pattern's figures, plus
+        `granules_simulated`, `runs`, `precision_percent` and `precision_met`."""
+        out = self.as_result().metrics.to_json()
+        out.update({"granules_simulated": self.granules_simulated, "runs": self.runs,
+                    "precision_percent": self.precision_pp, "precision_met": self.precision_met})
         return out
 
 

@@ -1,0 +1,71 @@
+"""`spreadgym simulate --precision`: runs pooled to the standard error asked, the JSON's
+new keys, a summary that prints no digit its standard error does not support."""
+
+import json
+import re
+
+import pytest
+
+from spreadgym.cli.main import main
+from spreadgym.report import decimals_supported, with_error
+
+
+def simulate_json(capsys, *argv) -> dict:
+    assert main(["simulate", *argv, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_json_reports_the_granules_behind_the_estimate_and_meets_the_precision(capsys):
+    out = simulate_json(capsys, "--set", "sim.granules=1024", "--precision", "0.5")
+    assert out["precision_percent"] == 0.5 and out["precision_met"] is True
+    assert out["cv_standard_error_percent"] <= 0.5
+    assert out["granules_simulated"] == 1024 * out["runs"] and out["granules"] == 1024
+    assert out["mass"]["released_kg"] > 0 and out["effective_swath_m"] > 0
+    tighter = simulate_json(capsys, "--set", "sim.granules=1024", "--precision", "0.25")
+    assert tighter["runs"] > out["runs"] and tighter["cv_standard_error_percent"] <= 0.25
+
+
+def test_the_cap_is_kept_and_reported(capsys):
+    out = simulate_json(capsys, "--set", "sim.granules=256", "--precision", "0.01", "--max-runs", "3")
+    assert out["runs"] == 3 and out["precision_met"] is False
+    assert any("cap of 3 runs" in note for note in out["notes"])
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["--precision", "0"], "--precision"),
+    (["--precision", "nan"], "--precision"),
+    (["--precision", "abc"], "--precision"),
+    (["--max-runs", "1"], "--max-runs"),
+    (["--max-runs", "100000"], "--max-runs"),
+])
+def test_bad_precision_flags_exit_2_with_one_line(capsys, argv, fragment):
+    assert main(["simulate", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert fragment in err and "Traceback" not in err
+
+
+def test_summary_shows_the_cv_to_the_place_of_its_standard_error(capsys):
+    assert main(["simulate", "--set", "sim.granules=1024", "--precision", "0.3"]) == 0
+    line = next(row for row in capsys.readouterr().out.splitlines() if row.startswith("CV at target"))
+    value, error = re.search(r"([\d.]+) \+- ([\d.]+) %", line).groups()
+    def places(text):
+        return len(text.split(".")[1]) if "." in text else 0
+
+    assert places(value) == places(error) == decimals_supported(float(error))
+
+
+@pytest.mark.parametrize("value, error, shown", [
+    (7.406, 0.188, "7.4 +- 0.2 %"), (7.406, 0.05, "7.41 +- 0.05 %"), (12.3, 2.6, "12 +- 3 %"),
+    (5.0, 0.096, "5.0 +- 0.1 %"), (7.4, None, "7.4 %"),
+])
+def test_with_error_rounds_to_the_first_significant_digit_of_the_error(value, error, shown):
+    assert with_error(value, error, "%") == shown
+
+
+def test_a_run_where_nothing_departs_prints_a_summary_not_a_traceback(capsys):
+    argv = ["simulate", "--set", "feed.radius_m=0", "--set", "feed.spread_m=0", "--set", "sim.granules=64"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "no granule left the spinner" in text and "nothing landed" in text
+    assert main([*argv, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["cv_percent_at_target"] is None
