@@ -8,14 +8,14 @@ import sys
 from tqdm import tqdm
 
 from spreadgym.cli import arguments
+from spreadgym.cli.simulate import precision_flag
 from spreadgym.config.overrides import parse_assignments
 from spreadgym.config.scene import load_scene
 from spreadgym.errors import SpreadgymError
 from spreadgym.physics.selection import MODELS
-from spreadgym.report import format_table, print_json
-from spreadgym.spread.reference import MIN_RUNS, pool_runs, reference_from
-
-DEFAULT_RUNS = 32
+from spreadgym.report import format_table, print_json, with_error
+from spreadgym.spread.precision import REFERENCE_MAX_RUNS, REFERENCE_PRECISION_PP, reference_precisely
+from spreadgym.spread.reference import MIN_RUNS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,13 +25,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="auto", choices=MODELS, help="spinner model (default: auto)")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
                         help="granules per run (default: the scene's)")
-    parser.add_argument("--replicates", type=arguments.integer(2, 65536), default=DEFAULT_RUNS, metavar="K",
-                        help=f"independent runs pooled (default {DEFAULT_RUNS}, at least {MIN_RUNS})")
+    parser.add_argument("--precision", type=precision_flag, default=REFERENCE_PRECISION_PP, metavar="PP",
+                        help="standard error wanted for the CV at the target width, in percentage points: runs are "
+                             f"pooled until it is reached (default {REFERENCE_PRECISION_PP:g})")
+    parser.add_argument("--max-runs", type=arguments.integer(MIN_RUNS, 65536), default=REFERENCE_MAX_RUNS,
+                        metavar="N", help=f"at most N runs (default {REFERENCE_MAX_RUNS})")
+    parser.add_argument("--replicates", type=arguments.integer(2, 65536), metavar="K",
+                        help=f"exactly K independent runs pooled instead (at least {MIN_RUNS}; ignores --precision)")
     parser.add_argument("--json", action="store_true", help="print the reference as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.replicates < MIN_RUNS:
+    if args.replicates is not None and args.replicates < MIN_RUNS:
         raise SpreadgymError(f"--replicates: {args.replicates} must be at least {MIN_RUNS}")
     overrides = parse_assignments(args.overrides)
     if args.granules is not None:
@@ -39,22 +44,24 @@ def run(args: argparse.Namespace) -> int:
             raise SpreadgymError(f"--granules: {args.granules} must be at least 1")
         overrides["sim.granules"] = args.granules
     scene = load_scene(args.scene, overrides)
-    with tqdm(total=args.replicates, desc="reference", unit="run", file=sys.stderr, disable=None,
-              leave=False) as bar:
-        pooled = pool_runs(scene, args.replicates, model=args.model,
-                           progress=lambda done, _total: bar.update(done - bar.n))
-    reference = reference_from(scene, pooled)
+    with tqdm(desc="reference", unit="run", file=sys.stderr, disable=None, leave=False) as bar:
+        reference = reference_precisely(scene, args.precision, args.max_runs, model=args.model,
+                                        progress=lambda done, _cap: bar.update(done - bar.n), runs=args.replicates)
+    payload = reference.to_json()
+    se = payload["cv_standard_error_percent"]
+    payload.update({"granules_simulated": reference.pooled.granules,
+                    "runs": reference.pooled.granules // scene.sim.granules,
+                    "precision_percent": None if args.replicates else args.precision,
+                    "precision_met": None if args.replicates else se is not None and se <= args.precision})
     if args.json:
-        print_json(reference.to_json())
+        print_json(payload)
     else:
-        print(summary(reference.to_json()))
+        print(summary(payload))
     return 0
 
 
 def _pm(value, error, unit: str) -> str:
-    if value is None:
-        return "-"
-    return f"{value:.2f} +- {error:.2f} {unit}" if error is not None else f"{value:.2f} {unit}"
+    return "-" if value is None else with_error(value, error, unit)
 
 
 def summary(ref: dict) -> str:
@@ -62,7 +69,8 @@ def summary(ref: dict) -> str:
     lo, hi = ref["effective_swath_interval_m"]
     rows = [
         ("model", f"{ref['model']} ({ref['model_reason']})"),
-        ("granules", f"{ref['granules']} in {ref['replicates']} replicates ({ref['landed_granules']} landed)"),
+        ("granules", f"{ref['granules']} in {ref['runs']} runs, {ref['replicates']} replicates "
+                     f"({ref['landed_granules']} landed)"),
         ("CV at target", _pm(ref["cv_percent_at_target"], ref["cv_standard_error_percent"], "%")
          + f" at {ref['target_swath_m']:g} m ({ref['driving']})"),
         ("plain tray CV", _pm(ref["cv_raw_percent"], None, "%")),

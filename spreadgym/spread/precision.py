@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Optional
 
 import numpy as np
@@ -31,14 +31,15 @@ from spreadgym.errors import SpreadgymError
 from spreadgym.physics.granules import replicate_sizes
 from spreadgym.spread import estimate, pattern
 from spreadgym.spread.pipeline import SimulationResult, run_scene
+from spreadgym.spread.reference import MIN_RUNS, Reference, reference_from
 
 PILOT_RUNS = 2
 SIMULATE_PRECISION_PP = 0.2
 """Default of `spreadgym simulate --precision`: the standard error (percentage points) of
 the CV at the target width. A person reads the CV to one decimal."""
 SIMULATE_MAX_RUNS = 64
-REFERENCE_PRECISION_PP = 0.05
-"""Default of `spreadgym reference --precision`: four times tighter than simulate's."""
+REFERENCE_PRECISION_PP = 0.1
+"""Default of `spreadgym reference --precision`: half simulate's."""
 REFERENCE_MAX_RUNS = 512
 MIN_PRECISION_PP = 0.001
 
@@ -63,7 +64,8 @@ def runs_needed(standard_error_pp: Optional[float], runs: int, precision_pp: flo
 def pool_until_precise(add_run: Callable[[], Optional[float]], precision_pp: float, max_runs: int,
                        pilot_runs: int = PILOT_RUNS) -> int:
     """Call `add_run()` (one more independent run pooled; it returns the pooled standard
-    error, None if unknown) by the rule of this module; returns the number of runs made."""
+    error, None if unknown) by the rule of this module; returns the number of runs made.
+    A pilot of `max_runs` runs is a fixed count: exactly that many."""
     if max_runs < pilot_runs:
         raise SpreadgymError(f"max runs: {max_runs} must be at least the {pilot_runs} pilot runs")
     runs, se = 0, None
@@ -94,6 +96,35 @@ class PooledMasses:
         """(sum of R, T) on the widest row."""
         widest = max(p.shape[1] for p in self.parts)
         return np.vstack([np.pad(p, ((0, 0), ((widest - p.shape[1]) // 2,) * 2)) for p in self.parts])
+
+    def trays(self) -> pattern.Trays:
+        """The pooled single pass on that row."""
+        masses = self.masses()
+        half = masses.shape[1] // 2
+        return pattern.Trays(np.arange(-half, half + 1) * self.tray_width_m, masses.sum(axis=0), self.tray_width_m)
+
+
+@dataclass(frozen=True)
+class PooledRuns:
+    """Runs pooled as replicate tray masses, with what a `reference.Reference` reports of
+    them (the metadata of `reference.PooledLandings`, without keeping every landing)."""
+
+    pooled: PooledMasses
+    replicates: int
+    granules: int  # simulated on the spinner, landed or not
+    landed_granules: int
+    angle_copies: int
+    released_kg: float
+    model: str
+    model_reason: str
+    wall_s: float
+
+    def replicate_masses(self, tray_width_m: float, min_half_width_m: float) -> tuple[pattern.Trays, np.ndarray]:
+        """(Trays, (K, T) masses); every run's row already reaches the target swath."""
+        del min_half_width_m  # each run's row was laid out to reach it
+        if tray_width_m != self.pooled.tray_width_m:
+            raise SpreadgymError(f"tray width {tray_width_m} m: the runs were caught on {self.pooled.tray_width_m} m")
+        return self.pooled.trays(), self.pooled.masses()
 
 
 @dataclass(frozen=True)
@@ -152,46 +183,82 @@ class PreciseEstimate:
         return out
 
 
+@dataclass
+class _Pool:
+    """What `_pool_runs` gathers while it runs."""
+
+    first: Optional[SimulationResult] = None
+    runs: int = 0
+    landed: int = 0
+    released_kg: float = 0.0
+    retained_kg: float = 0.0
+    intercepted_kg: float = 0.0
+    outcomes: dict = field(default_factory=dict)
+
+
+def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, library: Optional[MaterialLibrary],
+               tracks: int, progress: Optional[Callable[[int, int], None]],
+               pilot_runs: int = PILOT_RUNS) -> tuple[_Pool, PooledMasses]:
+    """Runs 0, 1, ... of `scene` (consecutive replicates) pooled by the rule of this module."""
+    check_precision(precision_pp)
+    library = library or load_library()
+    p = scene.pattern
+    per_run = replicate_sizes(scene.sim.granules, scene.sim.replicates).size
+    masses = PooledMasses(p.tray_width_m)
+    pool = _Pool()
+
+    def add_run() -> Optional[float]:
+        j = pool.runs
+        result = run_scene(scene, model=model, library=library, ci=False, tracks=tracks if j == 0 else 0,
+                           first_replicate=j * per_run)
+        pool.first = pool.first or result
+        pool.runs += 1
+        masses.add(result.replicate_masses_kg)
+        m = result.metrics
+        pool.landed += int(result.landed.sum())
+        pool.released_kg += m.released_kg
+        pool.retained_kg += m.retained_kg
+        pool.intercepted_kg += m.intercepted_kg
+        for key, count in m.outcomes.items():
+            pool.outcomes[key] = pool.outcomes.get(key, 0) + count
+        if progress:
+            progress(pool.runs, max_runs)
+        return estimate.estimate_cv(masses.masses(), p.tray_width_m, p.target_swath_m, p.driving).standard_error_percent
+
+    pool_until_precise(add_run, precision_pp, max_runs, pilot_runs)
+    return pool, masses
+
+
 def simulate_precisely(scene: Scene, precision_pp: float = SIMULATE_PRECISION_PP, max_runs: int = SIMULATE_MAX_RUNS,
                        model: str = "auto", library: Optional[MaterialLibrary] = None, tracks: int = 0,
                        progress: Optional[Callable[[int, int], None]] = None) -> PreciseEstimate:
     """Runs of `scene` pooled until the CV at the target has standard error `precision_pp`
-    (percentage points), at most `max_runs` runs; `progress(runs, planned)` after each."""
-    check_precision(precision_pp)
+    (percentage points), at most `max_runs` runs; `progress(runs, cap)` after each."""
     started = time.perf_counter()
-    library = library or load_library()
+    pool, pooled = _pool_runs(scene, precision_pp, max_runs, model, library, tracks, progress)
     p = scene.pattern
-    per_run = replicate_sizes(scene.sim.granules, scene.sim.replicates).size
-    pooled = PooledMasses(p.tray_width_m)
-    results: list[SimulationResult] = []
-    totals = {"released": 0.0, "retained": 0.0, "intercepted": 0.0}
-    outcomes: dict[str, int] = {}
-
-    def add_run() -> Optional[float]:
-        j = len(results)
-        result = run_scene(scene, model=model, library=library, ci=False, tracks=tracks if j == 0 else 0,
-                           first_replicate=j * per_run)
-        results.append(result if j == 0 else None)
-        pooled.add(result.replicate_masses_kg)
-        m = result.metrics
-        totals["released"] += m.released_kg
-        totals["retained"] += m.retained_kg
-        totals["intercepted"] += m.intercepted_kg
-        for key, count in m.outcomes.items():
-            outcomes[key] = outcomes.get(key, 0) + count
-        if progress:
-            progress(j + 1, max_runs)
-        return estimate.estimate_cv(pooled.masses(), p.tray_width_m, p.target_swath_m, p.driving).standard_error_percent
-
-    runs = pool_until_precise(add_run, precision_pp, max_runs)
-    masses = pooled.masses()
-    half = masses.shape[1] // 2
-    trays = pattern.Trays(np.arange(-half, half + 1) * p.tray_width_m, masses.sum(axis=0), p.tray_width_m)
+    masses, trays = pooled.masses(), pooled.trays()
     at_target = estimate.estimate_cv(masses, p.tray_width_m, p.target_swath_m, p.driving)
     has_mass = trays.total_kg > 0.0
     widths = pattern.default_widths_m(trays) if has_mass else np.zeros(0)
     cvs, _ = estimate.cv_curve(masses, p.tray_width_m, p.driving, widths)
     swath = pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent) if has_mass else 0.0
-    return PreciseEstimate(results[0], runs, precision_pp, max_runs, masses, trays, at_target, widths, cvs, swath,
-                           totals["released"], totals["retained"], totals["intercepted"], outcomes,
+    return PreciseEstimate(pool.first, pool.runs, precision_pp, max_runs, masses, trays, at_target, widths, cvs,
+                           swath, pool.released_kg, pool.retained_kg, pool.intercepted_kg, pool.outcomes,
                            time.perf_counter() - started)
+
+
+def reference_precisely(scene: Scene, precision_pp: float = REFERENCE_PRECISION_PP,
+                        max_runs: int = REFERENCE_MAX_RUNS, model: str = "auto",
+                        library: Optional[MaterialLibrary] = None,
+                        progress: Optional[Callable[[int, int], None]] = None, runs: Optional[int] = None) -> Reference:
+    """`spreadgym reference`: the converged pattern of runs pooled by this module's rule (at
+    least MIN_RUNS; exactly `runs` where given), as `reference.reference_from` reports it."""
+    started = time.perf_counter()
+    cap = runs if runs is not None else max(max_runs, MIN_RUNS)
+    pool, pooled = _pool_runs(scene, precision_pp, cap, model, library, 0, progress,
+                              pilot_runs=runs if runs is not None else PILOT_RUNS)
+    m = pool.first.metrics
+    summary = PooledRuns(pooled, pooled.masses().shape[0], pool.runs * m.granules, pool.landed, m.angle_copies,
+                         pool.released_kg, m.model, m.model_reason, time.perf_counter() - started)
+    return reference_from(scene, summary)

@@ -41,6 +41,11 @@ class PooledLandings:
     model_reason: str
     wall_s: float
 
+    @property
+    def landed_granules(self) -> int:
+        """Simulated granules that landed (each lands as `angle_copies` copies)."""
+        return int(round(self.x_m.size / self.angle_copies))
+
     def replicate_masses(self, tray_width_m: float, min_half_width_m: float) -> tuple[pattern.Trays, np.ndarray]:
         return estimate.replicate_tray_masses(self.x_m, self.mass_kg, self.replicate, self.replicates,
                                               tray_width_m, min_half_width_m)
@@ -76,7 +81,7 @@ class Reference:
     """A converged pattern: the CV at the target and along the bout widths, with standard errors."""
 
     scene: Scene
-    pooled: PooledLandings
+    pooled: PooledLandings  # or anything with its metadata, `landed_granules` and `replicate_masses`
     trays: pattern.Trays
     at_target: estimate.CvEstimate
     widths_m: np.ndarray
@@ -92,7 +97,7 @@ class Reference:
             "model": self.pooled.model,
             "model_reason": self.pooled.model_reason,
             "granules": self.pooled.granules,
-            "landed_granules": int(round(self.pooled.x_m.size / self.pooled.angle_copies)),
+            "landed_granules": self.pooled.landed_granules,
             "angle_copies": self.pooled.angle_copies,
             "replicates": self.pooled.replicates,
             "target_swath_m": p.target_swath_m,

@@ -1,4 +1,4 @@
-"""`spreadgym simulate --precision`: runs pooled to the standard error asked, the JSON's
+"""`spreadgym simulate --precision` and `reference --precision`: runs pooled to the standard error asked, the JSON's
 new keys, a summary that prints no digit its standard error does not support."""
 
 import json
@@ -69,3 +69,29 @@ def test_a_run_where_nothing_departs_prints_a_summary_not_a_traceback(capsys):
     assert "no granule left the spinner" in text and "nothing landed" in text
     assert main([*argv, "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["cv_percent_at_target"] is None
+
+
+def test_reference_pools_to_its_precision_or_exactly_the_runs_asked(capsys):
+    assert main(["reference", "--granules", "512", "--precision", "0.6", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["precision_met"] and out["cv_standard_error_percent"] <= 0.6
+    assert out["granules_simulated"] == out["granules"] == 512 * out["runs"]
+    assert main(["reference", "--granules", "256", "--replicates", "3", "--json"]) == 0
+    fixed = json.loads(capsys.readouterr().out)
+    assert fixed["runs"] == 3 and fixed["precision_met"] is None
+
+
+def test_pooled_tray_masses_give_the_reference_of_pooled_landings():
+    """The precision path keeps replicate tray masses, not every landing: same figures."""
+    from spreadgym.config.scene import load_scene
+    from spreadgym.spread.precision import reference_precisely
+    from spreadgym.spread.reference import pool_runs, reference_from
+
+    scene = load_scene("field", {"sim.granules": 256, "sim.seed": 4})
+    by_masses = reference_precisely(scene, runs=3).to_json()
+    by_landings = reference_from(scene, pool_runs(scene, 3)).to_json()
+    for key in ("granules", "landed_granules", "replicates", "effective_swath_m", "effective_swath_interval_m"):
+        assert by_masses[key] == by_landings[key], key
+    for key in ("cv_percent_at_target", "cv_standard_error_percent", "cv_raw_percent"):
+        assert by_masses[key] == pytest.approx(by_landings[key], rel=1e-9), key
+    assert by_masses["trays"]["center_m"].tolist() == by_landings["trays"]["center_m"].tolist()
