@@ -79,7 +79,10 @@ class Task:
         # a plain dict, so the task still pickles and deep-copies
         self._jobs: dict[Context, tuple[Scene, dict[str, float]]] = {}
         base = load_scene(cfg.scene, cfg.scene_overrides)
-        self.base_scene = scene_with(base, {"sim.granules": cfg.granules})
+        try:
+            self.base_scene = scene_with(base, {"sim.granules": cfg.granules})
+        except ConfigError as exc:  # the bound on a run's work: `granules` is the env's key for it
+            raise ConfigError("granules" if exc.key == "sim.granules" else exc.key, exc.message) from None
         ctx = cfg.context
         for name in ctx.fertilizers:
             try:

@@ -277,7 +277,8 @@ class Scene(StrictModel):
     feed: Feed
     granule: Granule = Granule()
     contact: Contact = Contact()
-    deflectors: list[Deflector] = Field(default_factory=list, max_length=MAX_DEFLECTORS, description="at most 32 plates")
+    deflectors: list[Deflector] = Field(default_factory=list, max_length=MAX_DEFLECTORS,
+                                        description="at most 32 plates")
     twin: Optional[Twin] = Field(default=None, description="a second disc (null: one disc)")
     flight: Flight = Flight()
     pattern: Pattern

@@ -99,3 +99,71 @@ def test_errors_cross_process_boundaries_intact():
     for error in (ConfigError("a.b", "bad value"), CalibrationError("--mass", 2.0, "outside (0, 0.01] kg")):
         again = pickle.loads(pickle.dumps(error))
         assert type(again) is type(error) and str(again) == str(error)
+
+
+# -- issue 36: YAML as data with limits, work bounded before it starts ------------------------
+
+def test_yaml_limits_are_one_line_each(tmp_path):
+    from spreadgym.config.resources import MAX_YAML_DEPTH, MAX_YAML_NODES
+
+    fan = ", ".join(["*a"] * 400)
+    cases = {
+        "deep": ("[" * (MAX_YAML_DEPTH + 1) + "]" * (MAX_YAML_DEPTH + 1), f"nested deeper than {MAX_YAML_DEPTH}"),
+        "wide": (f"a: &a [{', '.join(['1'] * 400)}]\nb: [{fan}]\n", f"more than {MAX_YAML_NODES} values"),
+        "recursive": ("a: &a {b: *a}\n", "recursive alias"),
+        "big": ("a: " + "x" * 1_000_001, "larger than 1000000 bytes"),
+    }
+    for name, (text, fragment) in cases.items():
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(text)
+        with pytest.raises(ConfigError) as err:
+            read_yaml(path)
+        assert err.value.key == str(path) and fragment in err.value.message and "\n" not in str(err.value), name
+    assert parse_yaml("[" * MAX_YAML_DEPTH + "]" * MAX_YAML_DEPTH) is not None  # at the limit: fine
+    shared = "a: &a [1, 2, 3]\nb: [*a, *a, *a]\n"
+    assert parse_yaml(shared) == {"a": [1, 2, 3], "b": [[1, 2, 3]] * 3}  # aliases within the limit: fine
+
+
+def test_a_deep_set_value_is_a_one_line_error():
+    with pytest.raises(ConfigError, match="nested deeper than"):
+        parse_assignment("name=" + "[" * 5000)
+
+
+def resolve_named_text(name: str) -> str:
+    from spreadgym.config.resources import resolve_named
+
+    return resolve_named("scenes", name).read_text(encoding="utf-8")
+
+
+def test_a_huge_value_in_an_error_is_cut_short(tmp_path):
+    path = tmp_path / "s.yaml"
+    text = resolve_named_text("paper").replace("name: paper", "name: [" + ", ".join(["12345"] * 20_000) + "]")
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_scene(str(path))
+    assert err.value.key == "name" and len(str(err.value)) < 200 and "..." in str(err.value)
+
+
+@pytest.mark.parametrize("scene, overrides, key, fragment", [
+    ("paper", {"sim.granules": 1_000_000, "sim.angle_copies": 256}, "sim.granules",
+     "1000000 x sim.angle_copies 256 = 256000000 landing points per run; allowed: at most 4000000"),
+    ("twin-field", {"sim.granules": 1_000_000}, "sim.granules", "x sim.angle_copies 32 x 2 discs"),
+    ("paper", {"pattern.target_swath_m": 0.5}, "pattern.target_swath_m", "narrower than 2 trays of 0.5 m"),
+    ("paper", {"pattern.target_swath_m": 1e-10}, "pattern.target_swath_m", "narrower than 2 trays"),
+    ("paper-deflectors", {"deflectors": [{"x_m": 0.3, "y_m": 0.0, "angle_deg": 90.0, "length_m": 0.05,
+                                          "material": "mc"}] * 33}, "deflectors", "at most 32 items"),
+])
+def test_work_and_degenerate_targets_are_refused(scene, overrides, key, fragment):
+    with pytest.raises(ConfigError) as err:
+        load_scene(scene, overrides)
+    assert err.value.key == key and fragment in err.value.message
+
+
+def test_the_largest_run_allowed_is_allowed_and_pooled_runs_are_bounded_too():
+    from spreadgym.config.scene import MAX_GRANULE_COPIES, check_pooled_work
+
+    scene = load_scene("paper", {"sim.granules": MAX_GRANULE_COPIES // 32, "pattern.target_swath_m": 1.0})
+    assert scene.sim.granules * scene.sim.angle_copies == MAX_GRANULE_COPIES
+    check_pooled_work(scene, 1, "--replicates")
+    with pytest.raises(ConfigError, match=r"--replicates: 2 runs x 4000000 landing points per run"):
+        check_pooled_work(scene, 2, "--replicates")

@@ -56,6 +56,53 @@ def test_constructor_kwargs_follow_the_schema(kwargs, key):
     assert err.value.key == key
 
 
+@pytest.mark.parametrize("kwargs, key, fragment", [
+    ({"scene_overrides": {"flight.wind_m_s": [5, 5], "flight.forward_speed_m_s": 3}},
+     "scene_overrides.flight.wind_m_s", "sets flight.wind_m_s itself from context.wind_x_m_s"),
+    ({"scene_overrides": {"flight": {"forward_speed_m_s": 3}}}, "scene_overrides.flight",
+     "context.forward_speed_m_s"),
+    ({"scene_overrides": {"fertilizer": "pellet"}}, "scene_overrides.fertilizer", "context.fertilizers"),
+    ({"scene_overrides": {"sim.granules": 100}}, "scene_overrides.sim.granules", "from granules"),
+    ({"context.fertilizers": ["pellet", "pellet"]}, "context.fertilizers", "'pellet' is listed twice"),
+    ({"context.spinner_materials": ["mc", "mc"]}, "context.spinner_materials", "'mc' is listed twice"),
+    ({"context.target_swath_m": [0.5, 0.5]}, "context.target_swath_m", "of at least 2 trays"),
+    ({"granules": 1_000_000}, "granules", "landing points per run"),
+])
+def test_what_the_env_would_ignore_or_cannot_hold_is_refused(kwargs, key, fragment):
+    with pytest.raises(ConfigError) as err:
+        gym.make(IDS[0], **kwargs)
+    assert err.value.key == key and fragment in err.value.message
+
+
+def test_an_override_the_context_leaves_alone_is_kept():
+    env = gym.make(IDS[0], granules=64, scene_overrides={"flight": {"drag_coefficient": 0.5}},
+                   disable_env_checker=True)
+    env.reset(seed=0)
+    assert env.unwrapped._scene.flight.drag_coefficient == 0.5
+
+
+@pytest.mark.parametrize("action", [[0.1 + 1j, 0.0], np.array([1.0 + 0j, 0.0]), ["0.1", "0"]])
+def test_complex_and_text_actions_are_refused(env, action):
+    env.reset(seed=0)
+    size = env.action_space.shape[0]
+    action = list(action) + [0.0] * (size - len(action))
+    with pytest.raises(ValueError, match="action must be"):
+        env.step(action)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_a_failed_reset_leaves_an_env_that_needs_a_reset_and_then_works(env_id):
+    env = gym.make(env_id, granules=64, disable_env_checker=True)
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match="options.context.fertilizer"):
+        env.reset(seed=1, options={"context": {"fertilizer": "nope"}})
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros(env.action_space.shape))
+    env.reset(seed=1)
+    _, reward, _, _, _ = env.step(np.zeros(env.action_space.shape))
+    assert np.isfinite(reward)
+
+
 def test_spreader_tuning_refuses_a_step_after_the_episode_ended():
     env = gym.make(IDS[1], granules=256, goal_cv_percent=1e4, disable_env_checker=True)
     env.reset(seed=0)

@@ -2,6 +2,7 @@
 (HYPOTHESIS_PROFILE=deep: many more examples, for a long run)."""
 
 import os
+import resource
 import signal
 from contextlib import contextmanager
 
@@ -25,3 +26,13 @@ def time_limit(seconds: int):
     finally:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, previous)
+
+
+@contextmanager
+def bounded(seconds: int, memory_bytes: int = 2**30):
+    """`time_limit(seconds)`, and fail when the process's peak memory grew by `memory_bytes` or more."""
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with time_limit(seconds):
+        yield
+    grown = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) * 1024  # ru_maxrss is in KiB
+    assert grown < memory_bytes, f"the peak memory grew by {grown / 2**20:.0f} MiB"
