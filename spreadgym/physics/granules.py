@@ -119,7 +119,7 @@ def _scrambled_sobol(rngs: list, count: int, dims: int) -> np.ndarray:
     return _sobol_points(shifts, lower, _direction_numbers(dims), count)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sobol_points(shifts, lower, direction, count):
     """(R, count, dims) points from the shift bits (R, dims, bits; least significant
     first), the scramble matrices (R, dims, bits, bits; only the strict lower triangle

@@ -63,6 +63,7 @@ class SpinnerModel:
     deflector: str  # key of DEFLECTOR_METHODS
     serves: str  # what it is exact or meant for
     stepped: bool = True  # the runner takes progress= and track_count=
+    batch_runner: Optional[str] = None  # "module:function" running many (scene, granules, contacts) in one call
 
     def run(self, scene: Scene, granules: GranuleBatch, contacts: Contacts,
             progress: Optional[Callable[[float], None]] = None, tracks: int = 0) -> Departure:
@@ -72,6 +73,14 @@ class SpinnerModel:
         if not self.stepped:
             return simulate(scene, granules, contacts)
         return simulate(scene, granules, contacts, progress=progress, track_count=tracks)
+
+    def run_batch(self, runs: list[tuple[Scene, GranuleBatch, Contacts]]) -> list[Departure]:
+        """Departure states of each (scene, granules, contacts): one call of the batch
+        runner when the model has one, else one run after the other; the same bits."""
+        if self.batch_runner is None:
+            return [self.run(*run) for run in runs]
+        module, function = self.batch_runner.split(":")
+        return getattr(importlib.import_module(module), function)(runs)
 
     def deflect(self, departure: Departure, scene: Scene, contacts: Contacts, granules: GranuleBatch) -> Departure:
         """States at the edge of the deflector zone, by this model's deflector method."""
@@ -86,7 +95,8 @@ SPINNER_MODELS: dict[str, SpinnerModel] = {m.name: m for m in (
     SpinnerModel("spring-damper", "spreadgym.physics.stepped.spring_damper:simulate_spring_damper", "pymunk",
                  "the seed paper's spring-dashpot vane contact with the measured contact time"),
     SpinnerModel("compiled", "spreadgym.physics.compiled:simulate_compiled", "pymunk",
-                 "the pymunk model's contact laws per granule, event-driven and compiled with numba"),
+                 "the pymunk model's contact laws per granule, event-driven and compiled with numba",
+                 batch_runner="spreadgym.physics.compiled.model:simulate_compiled_batch"),
 )}
 
 MODELS = ("auto", *SPINNER_MODELS)

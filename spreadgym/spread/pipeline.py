@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from typing import Callable, Optional
@@ -52,6 +53,38 @@ def run_spinner(
     return SPINNER_MODELS[model].run(scene, granules, contacts, progress, tracks)
 
 
+@dataclass(frozen=True)
+class ScenePlan:
+    """A scene's run up to its spinner runs: the discs, the model, and each disc's granules
+    and contacts (None for a disc whose throw is the first disc's mirrored)."""
+
+    scene: Scene
+    parts: list[twin.Disc]
+    chosen: str
+    reason: str
+    spins: list[Optional[tuple[GranuleBatch, Contacts]]]
+    first_replicate: int
+
+    def spinner_runs(self) -> list[tuple[Scene, GranuleBatch, Contacts]]:
+        """(disc scene, granules, contacts) of every disc that runs its spinner, in order."""
+        return [(disc.scene, *spin) for disc, spin in zip(self.parts, self.spins) if spin is not None]
+
+
+def plan_scene(scene: Scene, model: str, library: MaterialLibrary, first_replicate: int = 0) -> ScenePlan:
+    """The discs, model, granules (the replicates of sim.seed from `first_replicate`) and contacts of `scene`."""
+    parts = twin.discs(scene)
+    chosen, reason = twin.choose_for_discs(parts, model)
+    fertilizer = library.fertilizer(scene.fertilizer)
+    spins: list[Optional[tuple[GranuleBatch, Contacts]]] = []
+    for i, disc in enumerate(parts):
+        if i and twin.is_mirror_image(parts[0].scene, disc.scene):
+            spins.append(None)
+        else:
+            spins.append((sample_granules(disc.scene, fertilizer, scene.sim.replicates, first_replicate),
+                          resolve_contacts(disc.scene, library)))
+    return ScenePlan(scene, parts, chosen, reason, spins, first_replicate)
+
+
 def run_scene(
     scene: Scene,
     model: str = "auto",
@@ -68,25 +101,32 @@ def run_scene(
     scene runs each disc on its own (spreadgym.spread.twin) and scores both discs'
     landings as one pattern; the result's granule arrays hold the first disc's granules,
     then the second's, in the machine frame, and `metrics.departure` is the first disc's.
+    spreadgym.spread.batch runs many scenes at once, with the same results.
     """
     started = time.perf_counter()
-    library = library or load_library()
-    parts = twin.discs(scene)
-    chosen, reason = twin.choose_for_discs(parts, model)
-    fertilizer = library.fertilizer(scene.fertilizer)
+    plan = plan_scene(scene, model, library or load_library(), first_replicate)
+    departures = [run_spinner(*run, plan.chosen, progress, tracks) for run in plan.spinner_runs()]
+    result = finish_scene(plan, departures, ci)
+    result.metrics = dataclasses.replace(result.metrics, wall_s=time.perf_counter() - started)
+    return result
+
+
+def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) -> SimulationResult:
+    """The rest of the chain after the spinner runs (`departures`, one per `plan.spinner_runs()`):
+    cone, deflectors, release-angle copies, flight, trays and metrics (wall_s left 0)."""
+    scene, parts, chosen, first_replicate = plan.scene, plan.parts, plan.chosen, plan.first_replicate
     throws: list[twin.Throw] = []
     turns: list[rotations.Turn] = []  # each disc's release-angle copies (spread.rotations)
     mirror = False  # the second disc's throw is the first's mirrored
-    for disc in parts:
-        if throws and twin.is_mirror_image(parts[0].scene, disc.scene):
+    spun = iter(departures)
+    for disc, spin in zip(parts, plan.spins):
+        if spin is None:
             throws.append(twin.mirrored(throws[0]))
             turns.append(turns[0])  # its copies are the first disc's mirrored (rotations.copied_sample)
             mirror = True
             continue
-        granules = sample_granules(disc.scene, fertilizer, scene.sim.replicates, first_replicate)
-        contacts = resolve_contacts(disc.scene, library)
-        departure = tilted_by_cone(run_spinner(disc.scene, granules, contacts, chosen, progress, tracks),
-                                   np.radians(disc.scene.spinner.cone_deg))
+        granules, contacts = spin
+        departure = tilted_by_cone(next(spun), np.radians(disc.scene.spinner.cone_deg))
         launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
         throws.append(twin.Throw(granules, departure, launch))
         copies, copies_reason = rotations.copies_for(disc.scene)
@@ -131,7 +171,7 @@ def run_scene(
     cvs, _ = estimate.cv_curve(replicate_masses, p.tray_width_m, p.driving, widths)
     metrics = RunMetrics(
         model=chosen,
-        model_reason=reason,
+        model_reason=plan.reason,
         dt_s=departure.dt_s if departure.dt_s > 0.0 else None,  # None: closed forms, no step
         granules=granules.count,
         angle_copies=copies,
@@ -154,7 +194,7 @@ def run_scene(
         retained_kg=float(granules.mass_kg[~departure.departed].sum()),
         intercepted_kg=float(sum(lost_kg)),
         notes=_notes(scene, chosen, departure, launch, trays) + twin.interception_notes(throws, parts, lost_kg),
-        wall_s=time.perf_counter() - started,
+        wall_s=0.0,
     )
     return SimulationResult(scene, granules, departure, launch, flying, landing, sample, trays, replicate_masses,
                             metrics)

@@ -58,7 +58,7 @@ def _draw(rng, k, s):
     return w, (-sine if rng.random() < 0.5 else sine)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def antithetic_turns(rng, kappa, cos_mu, sin_mu, columns, cos_out, sin_out):
     """Fill rows 1.. of `cos_out`, `sin_out` (K, N) at `columns` with the cosines and
     sines of von Mises(mu_j, kappa_j) angles in antithetic pairs mu + phi, mu - phi.

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import prange
 
 from spreadgym.physics.compiled import face_motion, free_motion, vertical_events
 from spreadgym.physics.compiled.contact_law import disc_drag_impulse, frame_acceleration, impact
@@ -46,6 +47,7 @@ from spreadgym.physics.compiled.layout import (
     NY,
     OMEGA,
     OVERLAP_RATE,
+    PARALLEL,
     REBOUND_FLIGHT,
     SETTLE_SPEED,
     STEP,
@@ -280,10 +282,16 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
     return outcome
 
 
-@KERNEL
-def run_all(start, radius, z0, vz0, P, V, out, outcome, tracks):
-    """Every granule in turn; tracks (k, T, 3) for the first k granules."""
+@PARALLEL
+def run_all(start, radius, design, z0, vz0, P, V, vane_count, out, outcome, tracks):
+    """Every granule of every design, in parallel over the flat (design x granule) index:
+    granule i belongs to design[i], whose start height z0[d], vertical speed vz0[d],
+    parameters P[d] and first vane_count[d] vane rows V[d] it runs with. Each granule is
+    the same scalar `run_one` whichever thread runs it, so the bits do not depend on the
+    thread count. tracks (k, T, 3) for the first k granules."""
     empty = np.empty((0, 3))
-    for i in range(start.shape[0]):
+    for i in prange(start.shape[0]):
+        d = design[i]
         track = tracks[i] if i < tracks.shape[0] else empty
-        outcome[i] = run_one(start[i, 0], start[i, 1], radius[i], z0, vz0, P, V, out[i], track)
+        outcome[i] = run_one(start[i, 0], start[i, 1], radius[i], z0[d], vz0[d], P[d], V[d, :vane_count[d]], out[i],
+                             track)

@@ -19,10 +19,16 @@ from spreadgym.physics.geometry import vane_segments
 from spreadgym.physics.numerics import collision_bias_for
 
 drop_stale_caches()  # before any cached kernel loads: see kernel_cache
-KERNEL = njit(cache=True, error_model="numpy")
+KERNEL = njit(cache=True, error_model="numpy", nogil=True)
 """The compile options of every kernel. error_model="numpy": a division by zero gives
 inf/nan instead of raising, so no check is compiled into each division; every division
-that would not have raised gives the same bits (no fastmath: results stay exact IEEE)."""
+that would not have raised gives the same bits (no fastmath: results stay exact IEEE).
+nogil: a kernel lets other Python threads run (spreadgym.spread.batch runs scenes'
+stages side by side)."""
+
+PARALLEL = njit(cache=True, error_model="numpy", nogil=True, parallel=True)
+"""KERNEL for a loop over independent granules run with numba's threads (`prange`, as
+many as spreadgym.threads allows); each iteration is the same scalar code, so the same bits."""
 
 INLINED = njit(cache=True, error_model="numpy", inline="always")
 """KERNEL for what `granule_run.run_one` calls at every pass of its loop (the phases'

@@ -15,13 +15,14 @@ import numpy as np
 
 from spreadgym.config.scene import Scene
 from spreadgym.physics.compiled import granule_run
-from spreadgym.physics.compiled.layout import OMEGA_STEP, STEP, pack_parameters, pack_vanes
+from spreadgym.physics.compiled.layout import OMEGA_STEP, STEP, V_SIZE, pack_parameters, pack_vanes
 from spreadgym.physics.contacts import Contacts
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import GranuleBatch, rotate
 from spreadgym.physics.numerics import choose_time_step
 from spreadgym.physics.stepped.finish import MAX_SPINNER_TIME_S, STUCK_SPEED_M_S
 from spreadgym.physics.vertical import free_fall_to
+from spreadgym.threads import numba_threads
 
 MAX_TRACK_POINTS = 20_000
 
@@ -60,15 +61,34 @@ def kernel_inputs(scene: Scene, granules: GranuleBatch, contacts: Contacts) -> K
     )
 
 
-def run_kernel(inputs: KernelInputs, track_count: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(out (N, OUT_SIZE), outcome (N,), tracks (k, MAX_TRACK_POINTS, 3)) of one scene's granules."""
-    n = inputs.radius.shape[0]
+def run_kernels(batch: list[KernelInputs], track_count: int = 0) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(out (N, OUT_SIZE), outcome (N,), tracks (k, MAX_TRACK_POINTS, 3)) of each inputs'
+    granules, all designs' granules in one parallel kernel run; tracks of the first
+    design's first `track_count` granules."""
+    counts = np.array([inputs.radius.shape[0] for inputs in batch])
+    vanes = np.zeros((len(batch), max(inputs.vanes.shape[0] for inputs in batch), V_SIZE))
+    for d, inputs in enumerate(batch):
+        vanes[d, :inputs.vanes.shape[0]] = inputs.vanes
+    n = int(counts.sum())
     out = np.zeros((n, granule_run.OUT_SIZE))
     outcome = np.zeros(n, dtype=np.int8)
-    tracks = np.full((min(track_count, n), MAX_TRACK_POINTS, 3), np.nan)
-    granule_run.run_all(inputs.start, inputs.radius, inputs.z0, inputs.vz0, inputs.params, inputs.vanes, out,
-                        outcome, tracks)
-    return out, outcome, tracks
+    tracks = np.full((min(track_count, counts[0]), MAX_TRACK_POINTS, 3), np.nan)
+    with numba_threads():
+        granule_run.run_all(np.concatenate([inputs.start for inputs in batch]),
+                            np.concatenate([inputs.radius for inputs in batch]),
+                            np.repeat(np.arange(len(batch)), counts),
+                            np.array([inputs.z0 for inputs in batch]), np.array([inputs.vz0 for inputs in batch]),
+                            np.stack([inputs.params for inputs in batch]), vanes,
+                            np.array([inputs.vanes.shape[0] for inputs in batch]), out, outcome, tracks)
+    edges = np.cumsum(counts)[:-1]
+    no_tracks = tracks[:0]
+    return [(o, c, tracks if d == 0 else no_tracks)
+            for d, (o, c) in enumerate(zip(np.split(out, edges), np.split(outcome, edges)))]
+
+
+def run_kernel(inputs: KernelInputs, track_count: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`run_kernels` of one scene's granules."""
+    return run_kernels([inputs], track_count)[0]
 
 
 def simulate_compiled(
@@ -88,6 +108,14 @@ def simulate_compiled(
     if progress is not None:
         progress(float(out[:, granule_run.TIME].max(initial=0.0)))
     return departure_from(inputs, scene.spinner.omega_rad_s, out, outcome, tracks)
+
+
+def simulate_compiled_batch(runs: list[tuple[Scene, GranuleBatch, Contacts]]) -> list[Departure]:
+    """`simulate_compiled` of each (scene, granules, contacts), all granules in one parallel
+    kernel run; the same bits as one call each."""
+    batch = [kernel_inputs(*run) for run in runs]
+    return [departure_from(inputs, run[0].spinner.omega_rad_s, *result)
+            for inputs, run, result in zip(batch, runs, run_kernels(batch))]
 
 
 def departure_from(inputs: KernelInputs, omega: float, out: np.ndarray, outcome: np.ndarray,

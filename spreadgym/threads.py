@@ -1,0 +1,79 @@
+"""How many threads spreadgym's parallel stages use: one policy for the library and the CLI.
+
+The count is, first found: what `set_threads` was given (the CLI's `--threads N`); the
+environment variable SPREADGYM_THREADS; inside a Ray task or actor, the CPUs Ray gave
+it; otherwise the cores this process may run on (`os.sched_getaffinity`). numba's
+parallel kernels (`prange` over granules) and the batch's thread pool
+(spreadgym.spread.batch) both use that count, one stage after the other, so the two
+never multiply; nor do a Ray worker's threads and its neighbours'. Results never depend
+on it (every granule's arithmetic is the same on any thread).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from contextlib import contextmanager
+from typing import Iterator, Optional
+
+from spreadgym.errors import ConfigError
+
+ENV_VAR = "SPREADGYM_THREADS"
+_chosen: Optional[int] = None
+_LAUNCH = threading.Lock()
+
+
+def set_threads(count: Optional[int]) -> None:
+    """Use `count` threads from now on in this process (None: back to the default)."""
+    global _chosen
+    _chosen = None if count is None else _checked(count, "--threads")
+
+
+def thread_count() -> int:
+    """The threads a parallel stage may use now (>= 1)."""
+    if _chosen is not None:
+        return _chosen
+    if os.environ.get(ENV_VAR, "").strip():
+        return _checked(os.environ[ENV_VAR].strip(), ENV_VAR)
+    return _ray_task_cpus() or len(os.sched_getaffinity(0))
+
+
+@contextmanager
+def numba_threads() -> Iterator[int]:
+    """Hold while a numba parallel kernel runs; yields its thread count, `thread_count()`
+    at most numba's pool (NUMBA_NUM_THREADS). numba's count is per calling thread, so it
+    is set at each launch. Unless NUMBA_THREADING_LAYER says otherwise, numba takes a
+    fork-safe layer: GNU OpenMP's kills a forked child (multiprocessing's default start,
+    gymnasium's async vector env), and the fallback (workqueue) allows one launch at a
+    time per process, hence the lock."""
+    import numba
+
+    with _LAUNCH:
+        if "NUMBA_THREADING_LAYER" not in os.environ:
+            numba.config.THREADING_LAYER = "forksafe"
+        count = min(thread_count(), numba.config.NUMBA_NUM_THREADS)
+        numba.set_num_threads(count)
+        yield count
+
+
+def _checked(value, name: str) -> int:
+    try:
+        count = int(value)
+    except (TypeError, ValueError):
+        count = 0
+    if isinstance(value, bool) or count < 1 or str(count) != str(value).strip():
+        raise ConfigError(name, f"expected a whole number of threads >= 1, got {value!r}")
+    return count
+
+
+def _ray_task_cpus() -> int:
+    """The CPUs Ray assigned to the running task or actor; 0 outside one (Ray is never imported here)."""
+    ray = sys.modules.get("ray")
+    if ray is None or not ray.is_initialized():
+        return 0
+    try:
+        cpus = ray.get_runtime_context().get_assigned_resources().get("CPU", 0.0)
+    except Exception:  # the driver, or a Ray without the call: not a task
+        return 0
+    return max(1, int(cpus)) if cpus else 0
