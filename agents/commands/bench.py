@@ -15,7 +15,7 @@ from spreadgym.cli import arguments
 from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
-            "stability", "magnus", "chart-scale", "vector-env")
+            "stability", "magnus", "chart-scale", "vector-env", "startup", "precision")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,7 +36,16 @@ def write_csv(rows: list[dict], path: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     from spreadgym.agents.chart import scale
     from spreadgym.errors import SpreadgymError
-    from spreadgym.studies import benchmarks, estimate_bench, fidelity, magnus, references, speed_accuracy, stability
+    from spreadgym.studies import (
+        benchmarks,
+        estimate_bench,
+        fidelity,
+        magnus,
+        references,
+        speed_accuracy,
+        stability,
+        startup,
+    )
 
     if args.repeats < 1:
         raise SpreadgymError(f"--repeats: {args.repeats} must be at least 1")
@@ -62,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
                                              repeats=max(args.repeats, 15), progress=say),
         "chart-scale": lambda: scale.chart_scale_rows(repeats=args.repeats, progress=say),
         "vector-env": lambda: vector_env_steps_per_second(repeats=args.repeats),
+        "startup": lambda: startup.startup_rows(repeats=args.repeats),
+        "precision": lambda: precision_rows(estimate_bench, args.out, say),
     }
     plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy,
              "chart-scale": scale.plot_chart_scale}
@@ -101,6 +112,13 @@ def target_rows(estimate_bench, out: Path, say) -> list[dict]:
     for model in ("pymunk", "compiled", "analytic"):
         rows += estimate_bench.target_rows(out / "references", model=model, progress=say)
     (out / "estimate-targets.md").write_text(estimate_bench.targets_markdown(rows), encoding="utf-8")
+    return rows
+
+
+def precision_rows(estimate_bench, out: Path, say) -> list[dict]:
+    """simulate's default precision against the converged full model; also as markdown."""
+    rows = estimate_bench.precision_rows(out / "references", progress=say)
+    (out / "precision.md").write_text(estimate_bench.precision_markdown(rows), encoding="utf-8")
     return rows
 
 

@@ -153,3 +153,65 @@ def targets_markdown(rows: list[dict]) -> str:
             f"{r['sd_pp']:.2f} | {mark(r['sd_pp'] <= TARGET_SD_PP)} | {r['swath_equal_seeds']}/{r['seeds']} | "
             f"{1e3 * r['wall_median_s']:.0f} |")
     return "\n".join(lines) + "\n"
+
+
+PRECISION_SCENES = ("paper", "field", "paper-deflectors")
+TARGET_PRECISION_SD_PP = 0.25  # the precision knob's targets at simulate's default (pp)
+TARGET_STATED_SE_PP = 0.2
+
+
+def precision_rows(references_dir: Path, seeds: int = 8, names=PRECISION_SCENES, precision_pp: Optional[float] = None,
+                   progress: Callable[[str], None] = lambda _: None) -> list[dict]:
+    """`spreadgym simulate` at its default precision (runs pooled until the stated standard
+    error reaches it) on each scene, seeds FIRST_TARGET_SEED.., against the stored converged
+    full-model (pymunk) reference: bias, s.d. over seeds, the stated standard error and
+    its ratio to the observed s.d., swath agreement, runs and wall time."""
+    from spreadgym.spread.precision import SIMULATE_PRECISION_PP, simulate_precisely
+
+    precision_pp = SIMULATE_PRECISION_PP if precision_pp is None else precision_pp
+    references = load_references(references_dir, "pymunk")
+    family = reference_family()
+    rows = []
+    for name in names:
+        ref = references[name]
+        progress(f"{name}: {seeds} seeds at precision {precision_pp:g} pp")
+        results = [simulate_precisely(scene_with(family[name], {"sim.seed": FIRST_TARGET_SEED + seed}), precision_pp)
+                   for seed in range(seeds)]
+        cvs = np.array([r.at_target.cv_percent for r in results])
+        stated = np.array([r.at_target.standard_error_percent for r in results])
+        observed = float(cvs.std(ddof=1))
+        stated_rms = float(np.sqrt(np.mean(stated**2)))
+        rows.append({
+            "scene": name, "precision_pp": precision_pp, "seeds": seeds,
+            "converged_cv_percent": ref["cv_percent_at_target"],
+            "converged_se_percent": ref["cv_standard_error_percent"],
+            "mean_cv_percent": float(cvs.mean()), "bias_pp": float(cvs.mean() - ref["cv_percent_at_target"]),
+            "sd_pp": observed, "stated_se_rms_pp": stated_rms, "stated_se_max_pp": float(stated.max()),
+            "stated_over_observed": stated_rms / observed,
+            "converged_swath_m": ref["effective_swath_m"],
+            "swath_equal_seeds": int(sum(r.effective_swath_m == ref["effective_swath_m"] for r in results)),
+            "runs_median": statistics.median(r.runs for r in results),
+            "granules_simulated_median": statistics.median(r.granules_simulated for r in results),
+            "wall_median_s": statistics.median(r.wall_s for r in results),
+        })
+    return rows
+
+
+def precision_markdown(rows: list[dict]) -> str:
+    """The precision targets, one line per scene, each marked met or not."""
+    def mark(ok: bool) -> str:
+        return "yes" if ok else "**no**"
+
+    lines = ["| scene | converged CV (%) | mean (%) | bias (pp) | s.d. over seeds (pp) | stated SE, RMS / max (pp) | "
+             "stated / observed | swath equal | runs (median) | wall (s, median) | targets met |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        met = (abs(r["bias_pp"]) <= 0.5 and r["sd_pp"] <= TARGET_PRECISION_SD_PP
+               and r["stated_se_max_pp"] <= TARGET_STATED_SE_PP and 0.5 <= r["stated_over_observed"] <= 2.0
+               and r["swath_equal_seeds"] >= r["seeds"] - 1)
+        lines.append(
+            f"| {r['scene']} | {r['converged_cv_percent']:.2f} ± {r['converged_se_percent']:.2f} | "
+            f"{r['mean_cv_percent']:.2f} | {r['bias_pp']:+.2f} | {r['sd_pp']:.2f} | "
+            f"{r['stated_se_rms_pp']:.2f} / {r['stated_se_max_pp']:.2f} | {r['stated_over_observed']:.2f} | "
+            f"{r['swath_equal_seeds']}/{r['seeds']} | {r['runs_median']:g} | {r['wall_median_s']:.2f} | {mark(met)} |")
+    return "\n".join(lines) + "\n"

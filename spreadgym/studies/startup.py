@@ -1,0 +1,41 @@
+"""Start-up of each command: wall time of a fresh `spreadgym ...` process, end to end
+(`make bench`, section startup). A command pays for the modules it imports and for
+loading its compiled kernels from numba's cache; this measures both, as a person at a
+terminal meets them."""
+
+from __future__ import annotations
+
+import statistics
+import subprocess
+import sys
+import time
+
+COMMANDS = (
+    ("--help",),
+    ("materials",),
+    ("simulate", "--scene", "paper", "--json"),
+    ("simulate", "--scene", "field", "--json"),
+    ("reference", "--scene", "paper", "--json"),
+    ("chart", "--help"),
+)
+TARGETS_S = {("--help",): 0.6, ("simulate", "--scene", "paper", "--json"): 1.5}
+
+
+def startup_rows(repeats: int = 3) -> list[dict]:
+    """Median and range of the wall time of each command in a new interpreter (one warm-up
+    run first, so numba's cache is written and the figure is a warm install's)."""
+    rows = []
+    for argv in COMMANDS:
+        command = [sys.executable, "-m", "spreadgym.cli.main", *argv]
+        subprocess.run(command, capture_output=True, check=True)
+        walls = []
+        for _ in range(repeats):
+            started = time.perf_counter()
+            subprocess.run(command, capture_output=True, check=True)
+            walls.append(time.perf_counter() - started)
+        target = TARGETS_S.get(argv)
+        rows.append({"command": "spreadgym " + " ".join(argv), "repeats": repeats,
+                     "median_s": round(statistics.median(walls), 3), "min_s": round(min(walls), 3),
+                     "max_s": round(max(walls), 3), "target_s": target if target is not None else "",
+                     "met": "" if target is None else statistics.median(walls) <= target})
+    return rows
