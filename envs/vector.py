@@ -9,9 +9,10 @@ so with `reset(seed=s)` (sub-env i seeded s + i, as gymnasium's vector envs do) 
 observation, reward and info equals, bit for bit, that of `gym.make(id).reset(seed=s + i)`
 followed by the same actions, with a plain `reset()` after each episode.
 
-Speed: each sub-env's tray test is one `run_scene` call, so a batch of designs costs
-the sum of its scenes. About nine tenths of a run is per-granule kernel work, which
-batching designs together would not reduce; docs/rl-tools.md has the measured rates.
+Speed: the tray tests of one step run as one batch (spreadgym.spread.batch: every
+granule of every sub-env's design in one parallel kernel, the rest of the scenes side by
+side on spreadgym.threads' threads), with the same bits as one run each; each sub-env's
+`step` then takes its own result. docs/performance.md has the measured rates.
 
 Autoreset: `autoreset_mode="next_step"` (gymnasium's default: the step after an
 episode's end resets that sub-env and ignores its action) or `"same_step"` (the
@@ -29,8 +30,10 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from spreadgym.envs.common.actions import check_action
 from spreadgym.envs.spinner_design import SpinnerDesignEnv
 from spreadgym.errors import ConfigError
+from spreadgym.spread.batch import run_batch
 
 MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
 
@@ -87,28 +90,59 @@ class SpinnerDesignVectorEnv(VectorEnv):
         if actions.shape[:1] != (self.num_envs,):
             raise ValueError(f"actions must have {self.num_envs} rows (one per sub-env), got shape {actions.shape}")
         same_step = self.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
-        observations = []
-        rewards = np.zeros(self.num_envs, dtype=np.float64)
-        terminated = np.zeros(self.num_envs, dtype=bool)
-        truncated = np.zeros(self.num_envs, dtype=bool)
-        infos: dict = {}
-        for i, env in enumerate(self.envs):
-            if self._autoreset[i]:  # next_step mode only
-                obs, info = env.reset()
-            else:
-                obs, rewards[i], terminated[i], truncated[i], info = env.step(actions[i])
-                if same_step and (terminated[i] or truncated[i]):
-                    infos = self._add_info(infos, {"final_obs": obs, "final_info": info}, i)
+        self._run_designs(actions)
+        try:
+            observations = []
+            rewards = np.zeros(self.num_envs, dtype=np.float64)
+            terminated = np.zeros(self.num_envs, dtype=bool)
+            truncated = np.zeros(self.num_envs, dtype=bool)
+            infos: dict = {}
+            for i, env in enumerate(self.envs):
+                if self._autoreset[i]:  # next_step mode only
                     obs, info = env.reset()
-            observations.append(obs)
-            infos = self._add_info(infos, info, i)
+                else:
+                    obs, rewards[i], terminated[i], truncated[i], info = env.step(actions[i])
+                    if same_step and (terminated[i] or truncated[i]):
+                        infos = self._add_info(infos, {"final_obs": obs, "final_info": info}, i)
+                        obs, info = env.reset()
+                observations.append(obs)
+                infos = self._add_info(infos, info, i)
+        finally:
+            self.task.__dict__.pop("run", None)  # back to Task.run
         if not same_step:
             self._autoreset = terminated | truncated
         return np.stack(observations), rewards, terminated, truncated, infos
 
+    def _run_designs(self, actions: np.ndarray) -> None:
+        """The tray tests of every sub-env that steps now, as one batch: the scene each
+        sub-env's `step` will ask for (its action checked as `step` checks it), run
+        together; the shared task then hands each sub-env its result in turn."""
+        task = self.task
+        scenes = []
+        for i, env in enumerate(self.envs):
+            if not self._autoreset[i] and env._context is not None:  # a sub-env that needs a reset fails in step
+                settings = task.settings_map.to_settings(check_action(actions[i], task.settings_map.size))
+                scenes.append(task.settings_scene(env._scene, settings, env._sim_seed))
+        results = run_batch(scenes, model=task.cfg.model, library=task.library, ci=task.cfg.confidence_interval)
+        task.run = _Prefetched(scenes, results)  # step() below takes them; then Task.run again
+
     def close_extras(self, **kwargs: Any):
         for env in getattr(self, "envs", []):  # also for an instance whose __init__ raised
             env.close()
+
+
+class _Prefetched:
+    """A task's `run` for one vector step: the batch's results in order, each for the
+    scene it was computed for (checked)."""
+
+    def __init__(self, scenes: list, results: list) -> None:
+        self.pending = list(zip(scenes, results))
+
+    def __call__(self, scene, rendering: bool = False):
+        expected, result = self.pending.pop(0)
+        if rendering or scene != expected:
+            raise RuntimeError("the vector env's batch and its sub-envs' steps disagree")
+        return result
 
 
 def _sharing_task(env: SpinnerDesignEnv) -> SpinnerDesignEnv:

@@ -67,3 +67,36 @@ def test_async_vector_env_is_reproducible():
 
     first, second = rollout(), rollout()
     assert np.array_equal(first[0], second[0]) and np.array_equal(first[1], second[1])
+
+
+def test_native_vector_env_runs_64_designs_as_one_batch_with_the_single_envs_bits():
+    """SpinnerDesign's native vector env evaluates a step's designs together (spreadgym.spread.batch):
+    rewards and metrics equal the single envs', bit for bit, at 64 sub-envs."""
+    n, seed = 64, 5
+    venv = gym.make_vec("spreadgym/SpinnerDesign-v0", num_envs=n, autoreset_mode="same_step", **SMALL)
+    venv.reset(seed=seed)
+    actions = np.random.default_rng(0).uniform(-1.0, 1.0, (n, venv.single_action_space.shape[0])).astype(np.float32)
+    _, rewards, _, _, infos = venv.step(actions)
+    for i in range(n):
+        env = gym.make("spreadgym/SpinnerDesign-v0", **SMALL)
+        env.reset(seed=seed + i)
+        _, reward, _, _, info = env.step(actions[i])
+        assert rewards[i] == reward
+        assert infos["final_info"]["metrics"]["cv_percent_at_target"][i] == info["metrics"]["cv_percent_at_target"]
+    venv.close()
+
+
+def test_native_vector_env_refuses_a_nan_action_as_the_single_env_does():
+    venv = gym.make_vec("spreadgym/SpinnerDesign-v0", num_envs=2, **SMALL)
+    env = gym.make("spreadgym/SpinnerDesign-v0", **SMALL)
+    venv.reset(seed=0), env.reset(seed=0)
+    bad = np.full(venv.single_action_space.shape, np.nan, dtype=np.float32)
+    with pytest.raises(Exception) as single:
+        env.step(bad)
+    with pytest.raises(Exception) as batch:
+        venv.step(np.stack([np.zeros_like(bad), bad]))
+    assert type(batch.value) is type(single.value) and str(batch.value) == str(single.value)
+    assert "\n" not in str(single.value)
+    _, rewards, *_ = venv.step(np.zeros((2,) + bad.shape, dtype=np.float32))  # still steps afterwards
+    assert np.all(np.isfinite(rewards))
+    venv.close()
