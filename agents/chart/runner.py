@@ -130,7 +130,7 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
     `on_cell(cell, record)` is called after each finished cell is written.
     """
     if engine not in ENGINES:
-        raise SpreadgymError(f"engine {engine!r}; allowed: {', '.join(ENGINES)}")
+        raise SpreadgymError(f"engine {brief(engine)}; allowed: {', '.join(ENGINES)}")
     if workers is not None and workers < 1:
         raise SpreadgymError(f"--workers: {workers} must be at least 1")
     if address and engine != "ray":

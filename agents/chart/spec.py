@@ -185,12 +185,12 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
         raise SpreadgymError(f"--granules: {granules} is out of range; allowed [1, 1000000]")
     for flag, model in (("search model", search_model), ("verification model", verify_model)):
         if model not in MODELS:
-            raise SpreadgymError(f"{flag}: unknown model {model!r}; allowed: {', '.join(MODELS)}")
+            raise SpreadgymError(f"{flag}: unknown model {brief(model)}; allowed: {', '.join(MODELS)}")
     if int(verify_runs) < 2:
         raise SpreadgymError(f"verification runs: {verify_runs} must be at least 2")
     driving = driving or base.pattern.driving
     if driving not in ("racetrack", "back-and-forth"):
-        raise SpreadgymError(f"--driving: {driving!r}; allowed: racetrack, back-and-forth")
+        raise SpreadgymError(f"--driving: {brief(driving)}; allowed: racetrack, back-and-forth")
     names, notes = resolve_fertilizers(fertilizers, base, library)
     widths_m = parse_widths(widths) if isinstance(widths, str) else tuple(dict.fromkeys(float(w) for w in widths))
     if not widths_m:

@@ -8,6 +8,7 @@ from typing import Any, Optional
 import gymnasium as gym
 import numpy as np
 
+from spreadgym.config.base import brief
 from spreadgym.envs.common.config import load_env_config
 from spreadgym.envs.common.render import HumanViewer
 from spreadgym.envs.common.task import Context, Task
@@ -23,7 +24,7 @@ class SpreadgymEnv(gym.Env):
 
     def __init__(self, render_mode: Optional[str] = None, **kwargs: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ConfigError("render_mode", f"unknown {render_mode!r}; allowed: {self.metadata['render_modes']}")
+            raise ConfigError("render_mode", f"unknown {brief(render_mode)}; allowed: {self.metadata['render_modes']}")
         self.render_mode = render_mode
         self.config = load_env_config(self.config_name, kwargs)
         self.task = Task(self.config)

@@ -24,7 +24,7 @@ from typing import Any, Literal, Mapping, Optional
 
 from pydantic import BaseModel, Field, field_validator, model_validator
 
-from spreadgym.config.base import Integer, Real, StrictModel, validate
+from spreadgym.config.base import Integer, Real, StrictModel, brief, validate
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.config.resources import read_yaml, resolve_named
 from spreadgym.errors import ConfigError
@@ -63,7 +63,7 @@ class ContextConfig(StrictModel):
     def _each_once(cls, v):
         twice = next((name for i, name in enumerate(v) if name in v[:i]), None)
         if twice is not None:
-            raise ValueError(f"{twice!r} is listed twice; give each name once")
+            raise ValueError(f"{brief(twice)} is listed twice; give each name once")
         return v
 
     @field_validator("target_swath_m")
@@ -221,15 +221,15 @@ def _sections(schema: type[BaseModel]) -> set[str]:
 def load_env_config(name: str, overrides: Optional[Mapping[str, Any]] = None) -> DesignConfig:
     """Validated config of env `name` (`spinner_design` or `spreader_tuning`) with overrides."""
     if name not in SCHEMAS:
-        raise ConfigError("env", f"unknown env config {name!r}; known: {', '.join(SCHEMAS)}")
+        raise ConfigError("env", f"unknown env config {brief(name)}; known: {', '.join(SCHEMAS)}")
     schema = SCHEMAS[name]
     overrides = dict(overrides or {})
     source = overrides.pop("config", name)
     if not isinstance(source, str):
-        raise ConfigError("config", f"expected a config name or YAML path, got {source!r}")
+        raise ConfigError("config", f"expected a config name or YAML path, got {brief(source)}")
     raw = read_yaml(resolve_named("envs", source))
     if not isinstance(raw, dict):
-        raise ConfigError("config", f"{source!r} does not hold a mapping")
+        raise ConfigError("config", f"{brief(source)} does not hold a mapping")
     # Validate the file alone first, so its own errors are reported as such, then work
     # on the full dump (defaults included) so any key can be overridden.
     tree = validate(schema, dict(raw), "config").model_dump(mode="python")

@@ -12,6 +12,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Mapping, Optional
 
+from spreadgym.config.base import brief
 from spreadgym.config.resources import config_dir, read_yaml
 from spreadgym.errors import MaterialError
 
@@ -51,7 +52,7 @@ class Fertilizer:
         table = getattr(self, quantity)
         if surface not in table:
             raise MaterialError(
-                f"unknown surface {surface!r}; known surfaces: {', '.join(sorted(table))}"
+                f"unknown surface {brief(surface)}; known surfaces: {', '.join(sorted(table))}"
             )
         value = table[surface]
         if value is None:
@@ -72,12 +73,12 @@ class MaterialLibrary:
             return self.fertilizers[name]
         except KeyError:
             known = ", ".join(sorted(self.fertilizers))
-            raise MaterialError(f"unknown fertilizer {name!r}; known: {known}") from None
+            raise MaterialError(f"unknown fertilizer {brief(name)}; known: {known}") from None
 
     def check_surface(self, name: str) -> str:
         if name not in self.surfaces:
             known = ", ".join(sorted(self.surfaces))
-            raise MaterialError(f"unknown surface material {name!r}; known: {known}")
+            raise MaterialError(f"unknown surface material {brief(name)}; known: {known}")
         return name
 
 

@@ -10,6 +10,7 @@ from typing import Any, Iterable, Mapping, Optional, Union, get_args, get_origin
 import yaml
 from pydantic import BaseModel
 
+from spreadgym.config.base import brief
 from spreadgym.config.resources import parse_yaml
 from spreadgym.errors import ConfigError
 
@@ -19,12 +20,12 @@ def parse_assignment(text: str) -> tuple[str, Any]:
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:
-        raise ConfigError("--set", f"expected KEY=VALUE, got {text!r}")
+        raise ConfigError("--set", f"expected KEY=VALUE, got {brief(text)}")
     try:
         value = parse_yaml(raw) if raw.strip() else None
     except yaml.YAMLError as exc:
         problem = getattr(exc, "problem", None) or type(exc).__name__
-        raise ConfigError(key, f"value {raw!r} is not valid YAML: {problem}") from exc
+        raise ConfigError(key, f"value {brief(raw)} is not valid YAML: {problem}") from exc
     return key, value
 
 

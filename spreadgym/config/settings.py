@@ -23,6 +23,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from spreadgym.config.base import brief
 from spreadgym.config.scene import (
     MAX_PITCH_DEG,
     MAX_RPM,
@@ -67,7 +68,7 @@ def _range(key: str, value, low: float, high: float, unit: str) -> tuple[float, 
     try:
         a, b = (float(v) for v in value)
     except (TypeError, ValueError):
-        raise ConfigError(key, f"expected [low, high] in {unit}, got {value!r}") from None
+        raise ConfigError(key, f"expected [low, high] in {unit}, got {brief(value)}") from None
     if not (math.isfinite(a) and math.isfinite(b)) or a > b:
         raise ConfigError(key, f"expected finite [low, high] with low <= high, got [{a:g}, {b:g}]")
     if a < low or b > high:

@@ -167,3 +167,15 @@ def test_the_largest_run_allowed_is_allowed_and_pooled_runs_are_bounded_too():
     check_pooled_work(scene, 1, "--replicates")
     with pytest.raises(ConfigError, match=r"--replicates: 2 runs x 4000000 landing points per run"):
         check_pooled_work(scene, 2, "--replicates")
+
+
+def test_unknown_names_are_cut_short_in_messages():
+    from spreadgym.config.materials import load_library
+    from spreadgym.errors import MaterialError
+
+    with pytest.raises(MaterialError) as err:
+        load_library().fertilizer("x" * 100_000)
+    assert len(str(err.value)) < 300
+    with pytest.raises(ConfigError) as err:
+        parse_assignment("name=[" + "1" * 100_000)
+    assert len(str(err.value)) < 300
