@@ -118,6 +118,8 @@ class SpinnerDesignVectorEnv(VectorEnv):
         sub-env's `step` will ask for (its action checked as `step` checks it), run
         together; the shared task then hands each sub-env its result in turn."""
         task = self.task
+        if task.cfg.precision is not None:  # runs pooled to a precision: each sub-env's own, in its step
+            return
         scenes = []
         for i, env in enumerate(self.envs):
             if not self._autoreset[i] and env._context is not None:  # a sub-env that needs a reset fails in step

@@ -174,6 +174,11 @@ class DesignConfig(StrictModel):
     model: str = Field(default="auto", description="spinner model (see spreadgym.physics.selection)")
     granules: Integer = Field(default=2048, ge=1, le=1_000_000,
                        description="granules simulated per step, each at sim.angle_copies release angles")
+    precision: Optional[Real] = Field(
+        default=None, ge=0.001, le=100.0,
+        description="null: a fixed budget per step (one run of `granules`; the env's speed is its contract); "
+                    "PP: runs pooled until the CV's standard error reaches PP percentage points, as "
+                    "`spreadgym simulate --precision` does (slower, and the cost varies per step)")
     confidence_interval: bool = Field(default=False, description="the CV's 95 % t interval in info[\"metrics\"]")
     fallback_restitution: FallbackRestitution = FallbackRestitution()
     context: ContextConfig

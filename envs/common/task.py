@@ -24,6 +24,7 @@ from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.selection import choose_model
 from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.pipeline import SimulationResult, run_scene
+from spreadgym.spread.precision import simulate_precisely
 
 SEED_BOUND = 2**31 - 1
 
@@ -237,8 +238,12 @@ class Task:
         return scene_with(context_scene, {**self.settings_map.scene_overrides(settings), "sim.seed": int(seed)})
 
     def run(self, scene: Scene, rendering: bool = False) -> SimulationResult:
-        """One tray test; with `rendering`, a few paths over the disc are kept for the picture."""
+        """One tray test (one run; with the `precision` option, runs pooled to that standard
+        error); with `rendering`, a few paths over the disc are kept for the picture."""
         tracks = self.cfg.render.disc_tracks if rendering else 0
+        if self.cfg.precision is not None:
+            return simulate_precisely(scene, self.cfg.precision, model=self.cfg.model, library=self.library,
+                                      tracks=tracks).as_result()
         return run_scene(scene, model=self.cfg.model, library=self.library, ci=self.cfg.confidence_interval,
                          tracks=tracks)
 
