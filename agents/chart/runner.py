@@ -85,7 +85,7 @@ def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
     try:
         ray.init(address="local", num_cpus=cpus, include_dashboard=False,
                  object_store_memory=OBJECT_STORE_BASE_BYTES + OBJECT_STORE_PER_WORKER_BYTES * cpus, **quiet)
-    except Exception as exc:  # noqa: BLE001 - whatever stops Ray's processes, the user gets one line
+    except Exception as exc:  # whatever stops Ray's processes, the user gets one line
         ray.shutdown()
         raise SpreadgymError(f"the embedded Ray ({cpus} CPUs) did not start: {_first_line(exc)}") from None
     return True
