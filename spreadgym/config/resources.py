@@ -21,7 +21,7 @@ from spreadgym.errors import ConfigError
 
 MAX_YAML_BYTES = 1_000_000  # a scene is about 1.5 kB; the material library under 4 kB
 MAX_YAML_DEPTH = 50  # nested lists and mappings; a scene nests 4 deep
-MAX_YAML_NODES = 100_000  # scalars, lists and mappings, each alias counted as what it expands to
+MAX_YAML_NODES = 10_000  # scalars, lists and mappings, aliases counted as what they expand to; configs hold <= 255
 
 
 class YamlLimitError(yaml.MarkedYAMLError):
@@ -33,11 +33,15 @@ class NumberLoader(yaml.SafeLoader):
     and the document stays within `MAX_YAML_DEPTH` and `MAX_YAML_NODES`."""
 
     _depth = 0
+    _nodes = 0
 
     def compose_node(self, parent, index):
         if self._depth >= MAX_YAML_DEPTH:
             raise YamlLimitError(problem=f"nested deeper than {MAX_YAML_DEPTH} levels; allowed: at most "
                                          f"{MAX_YAML_DEPTH}", problem_mark=self.peek_event().start_mark)
+        self._nodes += 1
+        if self._nodes > MAX_YAML_NODES:  # stop reading at once: a long flat list costs no more than the limit
+            raise YamlLimitError(problem=_too_many(), problem_mark=self.peek_event().start_mark)
         self._depth += 1
         try:
             return super().compose_node(parent, index)
@@ -48,6 +52,10 @@ class NumberLoader(yaml.SafeLoader):
         node = super().compose_document()
         _expanded_size(node, 0, {})
         return node
+
+
+def _too_many() -> str:
+    return f"holds more than {MAX_YAML_NODES} values (aliases counted as copies); allowed: at most {MAX_YAML_NODES}"
 
 
 def _expanded_size(node: yaml.Node, depth: int, seen: dict) -> int:
@@ -75,8 +83,7 @@ def _expanded_size(node: yaml.Node, depth: int, seen: dict) -> int:
         size += _expanded_size(child, depth + 1, seen)
         below = max(below, 1 + seen[id(child)][1])
         if size > MAX_YAML_NODES:
-            raise YamlLimitError(problem=f"expands (aliases counted as copies) to more than {MAX_YAML_NODES} "
-                                         f"values; allowed: at most {MAX_YAML_NODES}", problem_mark=node.start_mark)
+            raise YamlLimitError(problem=_too_many(), problem_mark=node.start_mark)
     seen[id(node)] = (size, below)
     return size
 

@@ -51,8 +51,8 @@ def laughs(levels: int, fanout: int, key: str) -> str:
 
 
 BOMBS = {
-    "billion laughs as the name": (laughs(9, 9, "name"), "expands (aliases counted as copies) to more than"),
-    "billion laughs as the description": (laughs(9, 9, "description"), "expands"),
+    "billion laughs as the name": (laughs(9, 9, "name"), "holds more than 10000 values (aliases counted as copies)"),
+    "billion laughs as the description": (laughs(9, 9, "description"), "holds more than"),
     "100 000 [": ("[" * 100_000, f"nested deeper than {MAX_YAML_DEPTH} levels"),
     "5 000 nested {a: ": ("{a: " * 5000, f"nested deeper than {MAX_YAML_DEPTH} levels"),
     "aliases nesting deeper than the limit": (
@@ -60,6 +60,8 @@ BOMBS = {
                                                          for i in range(1, 4)]) + "\n",
         "aliases nest deeper than"),
     "a recursive alias": ("a: &a [1, *a]\n", "recursive alias"),
+    "a flat list of 499 000 values in 1 MB": ("name: [" + ",".join(["1"] * 499_000) + "]\n", "holds more than"),
+    "90 000 keys": ("".join(f"k{i}: 1\n" for i in range(90_000)), "holds more than"),
     "a 2 MB description": ("name: x\ndescription: " + "x" * 2_000_000 + "\n", "larger than 1000000 bytes"),
     "600 000 plates": ("deflectors:\n" + "  - {x_m: 0.3, y_m: 0, angle_deg: 0, length_m: 0.1, material: mc}\n"
                        * 600_000, "larger than 1000000 bytes"),
