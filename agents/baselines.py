@@ -38,14 +38,17 @@ from typing import Callable, Optional
 import numpy as np
 
 from spreadgym.agents.evaluation import SEARCH_SEED, WORST_CV_PERCENT, EvalContext, Row, score_action
+from spreadgym.envs.vector import step_designs
 from spreadgym.errors import SpreadgymError
 
 DEFAULT_BUDGET = 200
 CMA_SIGMA0 = 0.5
 RESCORE_FRACTION = 0.25  # of the budget spent re-scoring the leaders on fresh samples
 LEADERS = 4  # distinct best points re-scored
+RANDOM_BATCH = 64  # random search's points per batch
 
 Objective = Callable[[np.ndarray], float]  # unit action -> reward (to maximise)
+Objectives = Callable[[list], list]  # unit actions -> their rewards, evaluated together (one batch)
 
 
 @dataclass
@@ -60,8 +63,9 @@ class SearchResult:
 class _Tracker:
     """Wraps an objective: counts calls, refuses to go over the budget, keeps the best."""
 
-    def __init__(self, objective: Objective, dim: int, budget: int):
+    def __init__(self, objective: Objective, dim: int, budget: int, many: Optional[Objectives] = None):
         self.objective = objective
+        self.many = many or (lambda xs: [objective(x) for x in xs])
         self.dim = dim
         self.budget = int(budget)
         self.best_x = np.zeros(dim)
@@ -74,15 +78,20 @@ class _Tracker:
         return self.budget - len(self.history)
 
     def __call__(self, x) -> float:
-        if self.left <= 0:
+        return self.batch([x])[0]
+
+    def batch(self, xs) -> list[float]:
+        """The rewards of the points `xs`, evaluated together (`many`), in order."""
+        if self.left < len(xs):
             raise RuntimeError("search went over its budget")  # a bug in a search, not bad input
-        x = np.clip(np.asarray(x, dtype=float).reshape(self.dim), -1.0, 1.0)
-        reward = float(self.objective(x))
-        self.history.append(reward)
-        self.points.append(x.copy())
-        if reward > self.best_reward:
-            self.best_reward, self.best_x = reward, x.copy()
-        return reward
+        xs = [np.clip(np.asarray(x, dtype=float).reshape(self.dim), -1.0, 1.0) for x in xs]
+        rewards = [float(r) for r in self.many(xs)]
+        for x, reward in zip(xs, rewards):
+            self.history.append(reward)
+            self.points.append(x.copy())
+            if reward > self.best_reward:
+                self.best_reward, self.best_x = reward, x.copy()
+        return rewards
 
     def result(self) -> SearchResult:
         return SearchResult(self.best_x, self.best_reward, len(self.history), self.history, self.points)
@@ -94,11 +103,13 @@ def _check_budget(budget: int) -> int:
     return int(budget)
 
 
-def random_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, seed: int = 0) -> SearchResult:
-    track = _Tracker(objective, dim, _check_budget(budget))
+def random_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, seed: int = 0,
+                  many: Optional[Objectives] = None) -> SearchResult:
+    """Uniform points, evaluated in batches of RANDOM_BATCH (the same points as one at a time)."""
+    track = _Tracker(objective, dim, _check_budget(budget), many)
     rng = np.random.default_rng(seed)
     while track.left > 0:
-        track(rng.uniform(-1.0, 1.0, dim))
+        track.batch(list(rng.uniform(-1.0, 1.0, (min(RANDOM_BATCH, track.left), dim))))
     return track.result()
 
 
@@ -112,18 +123,20 @@ def grid_points(dim: int, budget: int) -> np.ndarray:
     return np.stack([m.reshape(-1) for m in mesh], axis=1)
 
 
-def grid_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, seed: int = 0) -> SearchResult:
-    track = _Tracker(objective, dim, _check_budget(budget))
-    for x in grid_points(dim, budget):
-        track(x)
+def grid_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, seed: int = 0,
+                many: Optional[Objectives] = None) -> SearchResult:
+    track = _Tracker(objective, dim, _check_budget(budget), many)
+    track.batch(list(grid_points(dim, budget)))
     return track.result()
 
 
 def cmaes_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, seed: int = 0,
-                 sigma0: float = CMA_SIGMA0, x0: Optional[np.ndarray] = None) -> SearchResult:
+                 sigma0: float = CMA_SIGMA0, x0: Optional[np.ndarray] = None,
+                 many: Optional[Objectives] = None) -> SearchResult:
+    """CMA-ES; each generation (population) is evaluated as one batch."""
     import cma
 
-    track = _Tracker(objective, dim, _check_budget(budget))
+    track = _Tracker(objective, dim, _check_budget(budget), many)
     rng = np.random.default_rng(seed)
     start = np.zeros(dim) if x0 is None else np.clip(np.asarray(x0, dtype=float).reshape(dim), -1, 1)
     restart = 0
@@ -136,18 +149,19 @@ def cmaes_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, s
         while track.left > 0 and not es.stop():
             xs = es.ask()
             if len(xs) > track.left:  # last, partial generation: evaluate what the budget allows
-                for x in xs[: track.left]:
-                    track(x)
+                track.batch(xs[: track.left])
                 break
-            es.tell(xs, [-track(x) for x in xs])
+            es.tell(xs, [-reward for reward in track.batch(xs)])
         restart += 1
         start = rng.uniform(-1.0, 1.0, dim)
     return track.result()
 
 
-def optuna_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, seed: int = 0) -> SearchResult:
+def optuna_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, seed: int = 0,
+                  many: Optional[Objectives] = None) -> SearchResult:
     """Optuna's TPE over the box: a Parzen model of the good and the bad trials proposes the
-    next point; deterministic for a given seed (sequential trials, seeded sampler)."""
+    next point; deterministic for a given seed (sequential trials, seeded sampler: each
+    trial waits for the last, so `many` is not used)."""
     import optuna
 
     track = _Tracker(objective, dim, _check_budget(budget))
@@ -227,20 +241,23 @@ def search_job(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGET,
     before = env.simulations
     counter = iter(range(budget))
 
-    def simulate(x: np.ndarray) -> tuple[float, float, Optional[float]]:
-        env.reset(seed=evaluation_seed(ctx, next(counter)), options=ctx.options())
-        _, reward, _, _, info = env.step(np.asarray(x, dtype=np.float64))
-        cv, se = info["metrics"].get("cv_percent_at_target"), info["metrics"].get("cv_standard_error_percent")
-        return float(reward), (WORST_CV_PERCENT if cv is None else float(cv)), se
+    def simulate(xs: list) -> list[tuple[float, float, Optional[float]]]:
+        """(reward, CV %, its standard error) of each point, each on a fresh sample, as one batch."""
+        resets = [(evaluation_seed(ctx, next(counter)), ctx.options()) for _ in xs]
+        found = []
+        for _, reward, _, _, info in step_designs(env, resets, [np.asarray(x, dtype=np.float64) for x in xs]):
+            cv, se = info["metrics"].get("cv_percent_at_target"), info["metrics"].get("cv_standard_error_percent")
+            found.append((float(reward), (WORST_CV_PERCENT if cv is None else float(cv)), se))
+        return found
 
     search_budget, _ = split_budget(_check_budget(budget))
-    result = SEARCHES[method](lambda x: simulate(x)[0], env.action_space.shape[0], search_budget,
-                              seed=seed + ctx.index)
+    result = SEARCHES[method](lambda x: simulate([x])[0][0], env.action_space.shape[0], search_budget,
+                              seed=seed + ctx.index, many=lambda xs: [r[0] for r in simulate(xs)])
     rescore_budget = budget - result.evaluations  # what the search left (a grid may leave more)
     kept = [Leader(x) for x in leaders(result, max(1, min(LEADERS, rescore_budget // 2)))]
-    for k in range(rescore_budget if budget >= 2 * len(kept) + result.evaluations else 0):
+    rescores = rescore_budget if budget >= 2 * len(kept) + result.evaluations else 0
+    for k, (reward, cv, se) in enumerate(simulate([kept[k % len(kept)].x for k in range(rescores)])):
         leader = kept[k % len(kept)]
-        reward, cv, se = simulate(leader.x)
         leader.rewards.append(reward)
         leader.cvs.append(cv)
         leader.cv_ses.append(se)

@@ -147,6 +147,30 @@ class _Prefetched:
         return result
 
 
+def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], actions: list) -> list[tuple]:
+    """`env.reset(seed=seed, options=options)` then `env.step(action)` for each reset and
+    action in turn, on one SpinnerDesign env (wrappers included): the same returns, bit
+    for bit, with the tray tests run as one batch. Each job is reset twice: once to learn
+    the scene its step runs, once to step it."""
+    base = env.unwrapped
+    task = base.task
+    scenes = []
+    for (seed, options), action in zip(resets, actions):
+        env.reset(seed=seed, options=options)
+        settings = task.settings_map.to_settings(check_action(action, task.settings_map.size))
+        scenes.append(task.settings_scene(base._scene, settings, base._sim_seed))
+    results = run_batch(scenes, model=task.cfg.model, library=task.library, ci=task.cfg.confidence_interval)
+    task.run = _Prefetched(scenes, results)
+    try:
+        steps = []
+        for (seed, options), action in zip(resets, actions):
+            env.reset(seed=seed, options=options)
+            steps.append(env.step(action))
+        return steps
+    finally:
+        task.__dict__.pop("run", None)  # back to Task.run
+
+
 def _sharing_task(env: SpinnerDesignEnv) -> SpinnerDesignEnv:
     """A sub-env with `env`'s (read-only) task and config and a state of its own."""
     other = copy.copy(env)

@@ -100,3 +100,23 @@ def test_native_vector_env_refuses_a_nan_action_as_the_single_env_does():
     _, rewards, *_ = venv.step(np.zeros((2,) + bad.shape, dtype=np.float32))  # still steps afterwards
     assert np.all(np.isfinite(rewards))
     venv.close()
+
+
+def test_step_designs_equals_reset_and_step_one_after_another():
+    """The searches' batches (agents.baselines) go through `step_designs`: the same returns as
+    each reset and step in turn, and one simulation counted per step."""
+    from spreadgym.agents.evaluation import SimulationCounter
+    from spreadgym.envs.vector import step_designs
+
+    env = SimulationCounter(gym.make("spreadgym/SpinnerDesign-v0", **SMALL))
+    actions = list(np.random.default_rng(1).uniform(-1.0, 1.0, (5, env.action_space.shape[0])))
+    resets = [(100 + i, None) for i in range(5)]
+    batch = step_designs(env, resets, actions)
+    assert env.simulations == 5
+    for (seed, options), action, (obs, reward, terminated, truncated, info) in zip(resets, actions, batch):
+        env.reset(seed=seed, options=options)
+        o, r, te, tr, i = env.step(action)
+        np.testing.assert_array_equal(obs, o, strict=True)
+        assert reward == r and (terminated, truncated) == (te, tr)
+        assert info["metrics"] == i["metrics"]
+    assert "run" not in env.unwrapped.task.__dict__  # the task runs its own scenes again
