@@ -33,6 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=arguments.SEED, default=0, help="seed of the searches (default 0)")
     parser.add_argument("--workers", type=arguments.COUNT, default=1, metavar="N",
                         help="processes for the searches (default 1; wall times are per core either way)")
+    parser.add_argument("--threads", type=arguments.integer(1, 4096), metavar="N",
+                        help="threads in all, shared by the --workers (default: SPREADGYM_THREADS, else every core "
+                             "this process may use); each search evaluates its batches on its share")
     parser.add_argument("--json", action="store_true", help="print the table and rows as JSON")
     parser.add_argument("--out", type=arguments.output_folder, default=Path("out/compare"), metavar="DIR",
                         help="folder for compare.csv/.md/.json and compare.png (default out/compare)")
@@ -76,6 +79,10 @@ def run(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise SpreadgymError(f"--workers must be at least 1, got {args.workers}")
     started = time.perf_counter()
+    from spreadgym.threads import set_threads, thread_count
+
+    per_worker = max(1, (args.threads or thread_count()) // args.workers)  # the two levels never multiply
+    set_threads(per_worker)
     policies = _load_policies(args.model or [])
     env_id = ev.DESIGN_ENV
     train_kwargs = policies[0][1].env_kwargs if policies else {}
@@ -108,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        with ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("forkserver")) as pool:
+        with ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("forkserver"),
+                                 initializer=set_threads, initargs=(per_worker,)) as pool:
             futures = {pool.submit(baseline_job, env_id, env_kwargs, ctx, m, args.budget, args.seed,
                                    args.episodes): m for m, ctx in tasks}
             for future in as_completed(futures):

@@ -16,6 +16,7 @@ from spreadgym.physics.selection import MODELS
 from spreadgym.report import format_table, print_json, with_error
 from spreadgym.spread.precision import REFERENCE_MAX_RUNS, REFERENCE_PRECISION_PP, reference_precisely
 from spreadgym.spread.reference import MIN_RUNS
+from spreadgym.threads import set_threads
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,10 +33,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="N", help=f"at most N runs (default {REFERENCE_MAX_RUNS})")
     parser.add_argument("--replicates", type=arguments.integer(2, 65536), metavar="K",
                         help=f"exactly K independent runs pooled instead (at least {MIN_RUNS}; ignores --precision)")
+    parser.add_argument("--threads", type=arguments.integer(1, 4096), metavar="N",
+                        help="threads to use (default: SPREADGYM_THREADS, else every core this process may use)")
     parser.add_argument("--json", action="store_true", help="print the reference as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.threads is not None:
+        set_threads(args.threads)
     if args.replicates is not None and args.replicates < MIN_RUNS:
         raise SpreadgymError(f"--replicates: {args.replicates} must be at least {MIN_RUNS}")
     overrides = parse_assignments(args.overrides)

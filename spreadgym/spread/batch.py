@@ -24,7 +24,7 @@ from __future__ import annotations
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import Callable, Optional, Sequence, TypeVar
+from typing import Callable, Optional, Sequence, TypeVar, Union
 
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Scene
@@ -38,14 +38,18 @@ R = TypeVar("R")
 
 
 def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[MaterialLibrary] = None,
-              ci: bool = True, first_replicate: int = 0) -> list[SimulationResult]:
-    """`run_scene(scene, model, library, ci=ci, first_replicate=first_replicate)` of every
-    scene, computed together; each result's `wall_s` is the batch's wall time over its size."""
+              ci: bool = True, first_replicate: Union[int, Sequence[int]] = 0) -> list[SimulationResult]:
+    """`run_scene(scene, model, library, ci=ci, first_replicate=first)` of every scene (with
+    its own `first_replicate` when a sequence is given), computed together; each result's
+    `wall_s` is the batch's wall time over its size."""
     started = time.perf_counter()
     scenes = list(scenes)
     for i, scene in enumerate(scenes):
         if not isinstance(scene, Scene):
             raise ConfigError(f"scenes[{i}]", f"expected a Scene, got {type(scene).__name__}")
+    firsts = [first_replicate] * len(scenes) if isinstance(first_replicate, int) else list(first_replicate)
+    if len(firsts) != len(scenes):
+        raise ConfigError("first_replicate", f"{len(firsts)} values for {len(scenes)} scenes")
     if not scenes:
         return []
     library = library or load_library()
@@ -55,7 +59,7 @@ def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[Ma
             """`[work(item) for item in items]`, on the pool's threads when there are several."""
             return [work(item) for item in items] if threads == 1 else list(pool.map(work, items))
 
-        plans = side_by_side(lambda scene: plan_scene(scene, model, library, first_replicate), scenes)
+        plans = side_by_side(lambda i: plan_scene(scenes[i], model, library, firsts[i]), range(len(scenes)))
         departures = [[] for _ in plans]
         for chosen in dict.fromkeys(plan.chosen for plan in plans):  # each model once, in order of first use
             owners = [i for i, plan in enumerate(plans) if plan.chosen == chosen for _ in plan.spinner_runs()]

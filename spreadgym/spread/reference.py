@@ -20,9 +20,10 @@ from spreadgym.config.scene import Scene
 from spreadgym.errors import ConfigError
 from spreadgym.physics.granules import replicate_sizes
 from spreadgym.spread import estimate, pattern
-from spreadgym.spread.pipeline import run_scene
+from spreadgym.spread.batch import run_batch
 
 MIN_RUNS = 2
+BATCH_RUNS = 64  # runs evaluated together by `pool_runs`
 SE_MULTIPLE_FOR_SWATH = 2.0
 
 
@@ -61,16 +62,18 @@ def pool_runs(scene: Scene, runs: int, model: str = "auto", library: Optional[Ma
     xs, masses, replicates = [], [], []
     granules, released, wall = 0, 0.0, 0.0
     result = None
-    for j in range(runs):
-        result = run_scene(scene, model=model, library=library, first_replicate=j * per_run)
-        xs.append(result.sample.x_m)
-        masses.append(result.sample.mass_kg)
-        replicates.append(result.sample.replicate + j * per_run)
-        granules += result.metrics.granules
-        released += float(result.granules.mass_kg.sum())
-        wall += result.metrics.wall_s
+    for start in range(0, runs, BATCH_RUNS):  # runs side by side (spread.batch), the same bits
+        chunk = range(start, min(start + BATCH_RUNS, runs))
+        for j, result in zip(chunk, run_batch([scene] * len(chunk), model=model, library=library,
+                                              first_replicate=[j * per_run for j in chunk])):
+            xs.append(result.sample.x_m)
+            masses.append(result.sample.mass_kg)
+            replicates.append(result.sample.replicate + j * per_run)
+            granules += result.metrics.granules
+            released += float(result.granules.mass_kg.sum())
+            wall += result.metrics.wall_s
         if progress:
-            progress(j + 1, runs)
+            progress(chunk.stop, runs)
     return PooledLandings(np.concatenate(xs), np.concatenate(masses), np.concatenate(replicates),
                           runs * per_run, granules, result.metrics.angle_copies, released, result.metrics.model,
                           result.metrics.model_reason, wall)
