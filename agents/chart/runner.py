@@ -45,6 +45,7 @@ class ChartResult:
     files: list[Path]
     computed: list[str] = field(default_factory=list)  # keys of the cells run this time
     reused: list[str] = field(default_factory=list)  # keys of the cells found finished
+    replaced: dict[str, str] = field(default_factory=dict)  # key -> why its file was not its record (run again)
     wall_s: float = 0.0
 
 
@@ -145,7 +146,7 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
     store = ChartStore(out, spec)
     store.probe()
     store.check_manifest()
-    records = store.finished()
+    records, replaced = store.finished()
     reused = list(records)
     todo = [c for c in spec.cells if c.key not in records]
     computed: list[str] = []
@@ -163,7 +164,7 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
             import ray
 
             ray.shutdown()
-    return ChartResult(spec, payload, files, computed, reused, time.perf_counter() - started)
+    return ChartResult(spec, payload, files, computed, reused, replaced, time.perf_counter() - started)
 
 
 def _run_cells(spec: ChartSpec, store: ChartStore, todo: Sequence[Cell], engine: str, records: dict,

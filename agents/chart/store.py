@@ -138,26 +138,30 @@ class ChartStore:
         if not (self.out / MANIFEST).exists():
             write_atomic(self.out / MANIFEST, json_text(_plain(self.spec.manifest())))
 
-    def finished(self) -> dict[str, dict]:
-        """key -> stored cell, for every cell of the spec whose file is its record."""
-        done = {}
+    def finished(self) -> tuple[dict[str, dict], dict[str, str]]:
+        """(key -> stored cell for every cell of the spec whose file is its record, key -> why
+        the file there is not, for the cells whose file is run again and replaced)."""
+        done, rejected = {}, {}
         for cell in self.spec.cells:
-            record = self.load(cell)
+            record, problem = self.load(cell)
             if record is not None:
                 done[cell.key] = record
-        return done
+            elif problem is not None:
+                rejected[cell.key] = problem
+        return done, rejected
 
-    def load(self, cell: Cell) -> Optional[dict]:
-        """The cell's stored record, or None where there is none or the file is not its record
-        (the cell is then run again and the file replaced)."""
+    def load(self, cell: Cell) -> tuple[Optional[dict], Optional[str]]:
+        """(the cell's stored record, None), or (None, why the file there is not its record),
+        or (None, None) where there is no file."""
         path = self.cell_path(cell)
         if not path.is_file():
-            return None
+            return None, None
         try:
             record = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return None
-        return record if record_problem(self.spec, cell, record) is None else None
+        except (OSError, ValueError) as exc:
+            return None, f"unreadable ({type(exc).__name__})"
+        problem = record_problem(self.spec, cell, record)
+        return (record, None) if problem is None else (None, problem)
 
     def picture_ok(self, cell: Cell) -> bool:
         """Whether the cell's picture is a whole PNG file (else it is drawn again)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 
 from spreadgym.cli import arguments
@@ -46,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
 
     result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving, budget=args.budget,
                    granules=args.granules, seed=args.seed, workers=args.workers, address=args.address)
+    for key, problem in result.replaced.items():
+        print(f"cells/{key}.json was not its cell's record ({problem}): computed again", file=sys.stderr)
     if args.json:
         print_json(result.payload)
         return 0

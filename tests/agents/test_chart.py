@@ -208,6 +208,7 @@ def test_a_damaged_folder_is_repaired_not_trusted(chart, tmp_path):
     (out / "cells" / f"{KEYS[1]}.png").write_bytes(b"\x89PNG\r\n\x1a\n not a picture")
     result = run_chart(small_spec(), out, engine="local", progress=False)
     assert result.computed == [KEYS[0]] and result.reused == [KEYS[1]]
+    assert result.replaced == {KEYS[0]: "it is another cell's"}
     assert without_wall(result.payload["rows"]) == without_wall(full.payload["rows"])
     assert ChartStore(out, result.spec).picture_ok(result.spec.cells[1])
 

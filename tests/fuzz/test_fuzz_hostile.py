@@ -176,7 +176,8 @@ def test_any_cell_file_loads_as_its_record_or_not_at_all(cell_record, tmp_path_f
     store.cell_path(spec.cells[0]).parent.mkdir(parents=True)
     store.cell_path(spec.cells[0]).write_bytes(content)
     with time_limit(10):
-        assert store.load(spec.cells[0]) is None
+        record, problem = store.load(spec.cells[0])
+    assert record is None and problem
 
 
 # -- Ray environment variables ----------------------------------------------------------
