@@ -29,4 +29,6 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "chart": ("spreadgym.agents.commands.chart", "spreading chart: settings per fertilizer and width, verified (Ray)"),
     "bench": ("spreadgym.agents.commands.bench",
               "run the benchmarks (speed, speed against accuracy) and write CSV/PNG under --out"),
+    "serve": ("spreadgym.agents.commands.serve",
+              "a local web app: move a setting and see the pattern; browse and run spreading charts"),
 }

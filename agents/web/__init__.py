@@ -1,0 +1,1 @@
+"""`spreadgym serve`: a local web app (FastAPI) with the pattern page and the chart page."""

@@ -1,0 +1,122 @@
+// The chart page: chart folders under the server's --charts folder, one chart job at a time.
+"use strict";
+const $ = (id) => document.getElementById(id);
+
+async function api(path, options) {
+  const response = await fetch(path, options);
+  const data = await response.json();
+  if (!response.ok) throw new Error(data.error || response.statusText);
+  return data;
+}
+
+function escaped(text) {
+  const div = document.createElement("div");
+  div.textContent = text;
+  return div.innerHTML;
+}
+
+function markdown(text) {  // chart.md as HTML: headings, the pipe table, list items, paragraphs (text escaped)
+  const out = [];
+  let table = null;
+  for (const line of text.split("\n")) {
+    if (line.startsWith("|")) {
+      const cells = line.slice(1, -1).split("|").map((c) => escaped(c.trim()).replaceAll("&lt;br&gt;", "<br>"));
+      if (cells.every((c) => /^-+$/.test(c))) continue;
+      const tag = table === null ? "th" : "td";
+      table = (table || "") + "<tr>" + cells.map((c) => `<${tag}>${c}</${tag}>`).join("") + "</tr>";
+      continue;
+    }
+    if (table !== null) { out.push("<table>" + table + "</table>"); table = null; }
+    if (line.startsWith("# ")) out.push("<h2>" + escaped(line.slice(2)) + "</h2>");
+    else if (line.startsWith("- ")) out.push("<li>" + escaped(line.slice(2)) + "</li>");
+    else if (line.trim()) out.push("<p>" + escaped(line) + "</p>");
+  }
+  if (table !== null) out.push("<table>" + table + "</table>");
+  return out.join("\n");
+}
+
+function fileUrl(folder, name) {
+  return "/files/charts/" + folder.split("/").concat(name.split("/")).map(encodeURIComponent).join("/");
+}
+
+async function showChart(name) {
+  try {
+    const c = await api("/api/charts/" + name.split("/").map(encodeURIComponent).join("/"));
+    const parts = [c.markdown ? markdown(c.markdown) :
+      "<p>Not finished yet: " + c.cell_pictures.length + " cell picture(s) so far.</p>"];
+    const links = c.files.map((f) => `<a href="${fileUrl(name, f)}">${escaped(f)}</a>`).join(" · ");
+    parts.push('<p class="noprint">files: ' + links + "</p>");
+    if (c.files.includes("chart.png")) parts.push(`<img alt="chart" src="${fileUrl(name, "chart.png")}">`);
+    for (const p of c.cell_pictures) parts.push(`<img alt="${escaped(p)}" src="${fileUrl(name, p)}">`);
+    $("chart").innerHTML = parts.join("\n");
+    $("error").textContent = "";
+  } catch (err) {
+    $("error").textContent = err.message;
+  }
+}
+
+async function listCharts() {
+  const data = await api("/api/charts");
+  $("folders").innerHTML = "";
+  for (const c of data.charts) {
+    const li = document.createElement("li");
+    const a = document.createElement("a");
+    a.textContent = c.name + (c.finished ? "" : " (" + c.cells + " cell(s), not finished)");
+    a.addEventListener("click", () => showChart(c.name));
+    li.appendChild(a);
+    $("folders").appendChild(li);
+  }
+  if (!data.charts.length) $("folders").innerHTML = "<li>none yet</li>";
+}
+
+function showJob(s) {
+  if (s.state === "idle") { $("job-status").textContent = "no job"; return; }
+  $("job-status").textContent = `${s.out}: ${s.state}, ${s.done} of ${s.total} cell(s); ${s.message}`;
+  $("job-progress").max = s.total || 1;
+  $("job-progress").value = s.done || 0;
+}
+
+async function poll() {
+  try {
+    const s = await api("/api/chart-jobs");
+    showJob(s);
+    if (s.state === "running") setTimeout(poll, 1000);
+    else listCharts();
+  } catch (err) {
+    $("error").textContent = err.message;
+  }
+}
+
+async function startJob() {
+  const body = { scene: $("job-scene").value, fertilizers: $("job-fertilizers").value,
+    widths: $("job-widths").value, budget: Number($("job-budget").value), out: $("job-out").value };
+  if ($("job-workers").value) body.workers = Number($("job-workers").value);
+  try {
+    showJob(await api("/api/chart-jobs", { method: "POST", headers: { "Content-Type": "application/json" },
+      body: JSON.stringify(body) }));
+    $("error").textContent = "";
+    poll();
+  } catch (err) {
+    $("error").textContent = err.message;
+  }
+}
+
+async function cancelJob() {
+  $("job-status").textContent = "cancelling...";
+  try {
+    showJob(await api("/api/chart-jobs", { method: "DELETE" }));
+  } catch (err) {
+    $("error").textContent = err.message;
+  }
+}
+
+async function start() {
+  const scenes = await api("/api/scenes");
+  for (const name of scenes.scenes) $("job-scene").add(new Option(name, name, false, name === "paper"));
+  $("job-start").addEventListener("click", startJob);
+  $("job-cancel").addEventListener("click", cancelJob);
+  await listCharts();
+  poll();
+}
+
+start().catch((err) => { $("error").textContent = err.message; });

@@ -1,0 +1,185 @@
+"""The web app's API through FastAPI's test client: the simulate contract (the CLI's own
+JSON), bad input as 422 naming the key, chart folders confined to --charts, the body cap,
+and a cancelled chart job that leaves the server working."""
+
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from spreadgym.agents.web.app import MAX_BODY_BYTES, create_app
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALL = {"sim.granules": 256}
+
+
+@pytest.fixture(scope="module")
+def charts_dir(tmp_path_factory):
+    root = tmp_path_factory.mktemp("charts")
+    shutil.copytree(ROOT / "docs" / "charts" / "paper", root / "paper")
+    (root / "notes.txt").write_text("not a chart")
+    (root / "outside").symlink_to("/")
+    return root
+
+
+@pytest.fixture(scope="module")
+def client(charts_dir):
+    with TestClient(create_app(charts_dir)) as test_client:
+        yield test_client
+
+
+def cli_json(scene: str, sets: list[str]) -> dict:
+    argv = [sys.executable, "-m", "spreadgym.cli.main", "simulate", "--scene", scene, "--json"]
+    for assignment in sets:
+        argv += ["--set", assignment]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def test_health_and_pages(client):
+    assert client.get("/api/health").json() == {"ok": True}
+    assert "plotly.min.js" in client.get("/").text
+    assert client.get("/charts").status_code == 200
+    js = client.get("/static/plotly.min.js")
+    assert js.status_code == 200 and len(js.content) > 1_000_000  # the package's bundle, no CDN
+
+
+@pytest.mark.parametrize("scene, sets", [
+    ("paper", {"spinner.rpm": 700, "vanes.pitch_deg": "10", "sim.granules": 512}),
+    ("paper-deflectors", {"deflectors.0.angle_deg": 70.5, "sim.granules": 128, "sim.angle_copies": 4}),
+])
+def test_simulate_is_the_cli_json(client, scene, sets):
+    response = client.post("/api/simulate", json={"scene": scene, "set": sets})
+    assert response.status_code == 200, response.text
+    served = response.json()
+    printed = cli_json(scene, [f"{k}={v}" for k, v in sets.items()])
+    served.pop("wall_s")
+    printed.pop("wall_s")
+    assert served == printed
+
+
+def test_pattern_view_has_the_pictures_and_the_cli_digits(client):
+    response = client.post("/api/pattern", json={"scene": "paper", "set": SMALL})
+    assert response.status_code == 200, response.text
+    data = response.json()
+    m = data["metrics"]
+    from spreadgym.report import with_error
+
+    assert data["cv_text"] == with_error(m["cv_percent_at_target"], m["cv_standard_error_percent"], "%")
+    plot = data["plot"]
+    assert plot["plan"]["tracks"] and plot["plan"]["rays"] and len(plot["plan"]["vanes"]) == 4
+    assert len(plot["trays"]["single_percent"]) == len(m["trays"]["center_m"])
+    assert plot["trays"]["overlap_percent"] and plot["landing"][0]
+
+
+def test_scene_controls(client):
+    info = client.post("/api/scene", json={"scene": "paper-deflectors"}).json()
+    keys = [c["key"] for c in info["controls"]]
+    assert keys[:2] == ["spinner.rpm", "vanes.pitch_deg"]
+    assert {"feed.radius_m", "feed.angle_deg", "deflectors.0.angle_deg", "deflectors.1.angle_deg",
+            "pattern.target_swath_m"} <= set(keys)
+    assert "pellet" in info["fertilizers"]
+
+
+@pytest.mark.parametrize("body, named", [
+    ({"scene": "nope"}, "scenes: unknown name 'nope'"),
+    ({"scene": "../../etc/passwd.yaml"}, "scenes: unknown name"),  # a name, never a path
+    ({"set": {"spinner.rpm": 1e6}}, "spinner.rpm"),
+    ({"set": {"spinner.rpm": "fast"}}, "spinner.rpm"),
+    ({"set": {"spinner.rpmm": 500}}, "spinner.rpmm: unknown key"),
+    ({"set": {"vanes.pitch_deg": 90}}, "vanes.pitch_deg"),
+    ({"set": {"pattern.target_swath_m": 0.5}}, "pattern.target_swath_m"),
+    ({"set": {"pattern.target_swath_m": 3.2}}, "pattern.target_swath_m"),
+    ({"set": {"fertilizer": "sand"}}, "unknown fertilizer 'sand'"),
+    ({"set": {"sim.granules": 10**9}}, "sim.granules"),
+    ({"set": {"spinner.rpm": "[1"}}, "spinner.rpm: value '[1' is not valid YAML"),
+    ({"set": [1, 2]}, "set:"),
+    ({"scene": 5}, "scene:"),
+    ({"precision": 0}, "precision:"),
+    ({"max_runs": 1}, "max_runs: 1 is out of range"),
+    ({"model": "magic"}, "model: unknown model 'magic'"),
+    ({"colour": "red"}, "colour: Extra inputs"),
+    ({"yaml": "name: [unclosed"}, "uploaded scene: not valid YAML"),
+    ({"yaml": "- a list"}, "uploaded scene: does not hold a mapping"),
+    ({"yaml": "name: x\n"}, "missing (required)"),
+    ({"yaml": "a: &a [1]\n" + "".join(f"{chr(98 + i)}: &{chr(98 + i)} [*{chr(97 + i)}, *{chr(97 + i)}, "
+                                       f"*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}]\n"
+                                       for i in range(10))}, "uploaded scene: YAML"),
+])
+def test_bad_input_is_422_naming_the_key(client, body, named):
+    for path in ("/api/simulate", "/api/pattern"):
+        response = client.post(path, json=body)
+        assert response.status_code == 422, response.text
+        error = response.json()["error"]
+        assert named in error and "\n" not in error
+
+
+def test_the_cli_says_the_same(client):
+    sets = ["spinner.rpm=1000000", "spinner.rpmm=5", "pattern.target_swath_m=0.5"]
+    for assignment in sets:
+        key, value = assignment.split("=")
+        done = subprocess.run([sys.executable, "-m", "spreadgym.cli.main", "simulate", "--set", assignment],
+                              capture_output=True, text=True, timeout=120)
+        served = client.post("/api/simulate", json={"set": {key: value}}).json()["error"]
+        assert done.stderr.strip() == f"spreadgym simulate: error: {served}"
+
+
+def test_oversized_bodies_are_refused(client):
+    text = "name: x\n" + "#" * MAX_BODY_BYTES
+    response = client.post("/api/scene", json={"yaml": text})
+    assert response.status_code == 413 and "at most 1000000 bytes" in response.json()["error"]
+    chunks = (b"x" * 100_000 for _ in range(20))  # no Content-Length: counted as it streams
+    response = client.post("/api/simulate", content=chunks, headers={"content-type": "application/json"})
+    assert response.status_code == 413
+    assert client.post("/api/simulate", content=b"{not json", headers={"content-type": "application/json"}
+                       ).status_code == 422
+    assert client.get("/api/health").json() == {"ok": True}
+
+
+def test_chart_folders_and_files(client):
+    listed = client.get("/api/charts").json()["charts"]
+    assert [c["name"] for c in listed] == ["paper"] and listed[0]["finished"]
+    detail = client.get("/api/charts/paper").json()
+    assert detail["rows"] and "Spreading chart" in detail["markdown"] and "chart.png" in detail["files"]
+    picture = client.get("/files/charts/paper/chart.png")
+    assert picture.status_code == 200 and picture.content.startswith(b"\x89PNG")
+
+
+@pytest.mark.parametrize("path", [
+    "/api/charts/%2e%2e", "/api/charts/%2e%2e/%2e%2e/etc", "/api/charts/paper%2f%2e%2e%2f%2e%2e",
+    "/api/charts/.hidden", "/api/charts/outside/etc", "/api/charts/notes.txt", "/api/charts/missing",
+    "/files/charts/%2e%2e/%2e%2e/etc/passwd", "/files/charts/outside/etc/passwd", "/files/charts/notes.txt",
+    "/files/charts/paper/manifest.json%00.png", "/files/charts//etc/passwd", "/static/..%2fapp.py",
+])
+def test_no_path_leaves_the_charts_folder(client, path):
+    response = client.get(path)
+    assert response.status_code in (404, 422), (path, response.text)
+    assert "error" in response.json() and "root:" not in response.text
+
+
+def test_a_cancelled_chart_job_leaves_the_server_working(client, charts_dir):
+    bad = client.post("/api/chart-jobs", json={"scene": "paper", "fertilizers": "pellet", "widths": "3.2",
+                                               "out": "job"})
+    assert bad.status_code == 422 and "3.2" in bad.json()["error"]
+    bad = client.post("/api/chart-jobs", json={"scene": "paper", "fertilizers": "pellet", "widths": "3",
+                                               "out": "../job"})
+    assert bad.status_code == 422 and "--out" in bad.json()["error"]
+    job = {"scene": "paper", "fertilizers": "pellet", "widths": "3,4", "out": "job", "budget": 50,
+           "granules": 256, "workers": 1}
+    started = client.post("/api/chart-jobs", json=job)
+    assert started.status_code == 200, started.text
+    assert started.json()["state"] == "running" and started.json()["total"] == 2
+    assert client.post("/api/chart-jobs", json=job).status_code == 422  # one at a time
+    time.sleep(2.0)
+    cancelled = client.delete("/api/chart-jobs")
+    assert cancelled.status_code == 200 and cancelled.json()["state"] == "cancelled"
+    assert client.delete("/api/chart-jobs").status_code == 422  # nothing left to cancel
+    assert client.get("/api/health").json() == {"ok": True}
+    assert client.post("/api/simulate", json={"set": SMALL}).status_code == 200
+    assert not (charts_dir / "job" / "chart.json").exists()
