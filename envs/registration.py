@@ -14,6 +14,12 @@ imported `spreadgym`. Fresh worker processes (SubprocVecEnv, async vector envs, 
 env runners) import nothing of ours unless told, so there the `spreadgym:NAME-v0`
 form is the one that always works (docs/rl-tools.md).
 
+The passive env checker is off by default (`gym.make(..., disable_env_checker=False)`
+turns it on): gymnasium 1.4's checker marks the first reset as checked even when it
+raised (a bad `options["context"]`), and the next good reset and step then fail inside
+the checker with a TypeError. The envs pass gymnasium's and SB3's full `check_env` in
+the tests, and a failed reset leaves them needing a reset (ResetNeeded), not broken.
+
 SpreaderTuning's time limit is the registry's `max_episode_steps`, the default
 `max_steps` of its YAML: gymnasium's TimeLimit and the env's own truncation (whose
 `steps_left` entry the observation needs) end the episode at the same step. Who
@@ -47,4 +53,4 @@ def register_envs() -> None:
         for form in ID_FORMS:
             env_id = form.format(name)
             if env_id not in gymnasium.registry:
-                gymnasium.register(id=env_id, max_episode_steps=limits.get(name), **entry)
+                gymnasium.register(id=env_id, max_episode_steps=limits.get(name), disable_env_checker=True, **entry)

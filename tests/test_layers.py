@@ -1,4 +1,4 @@
-"""The layers read upwards only: config -> physics -> spread -> viz -> studies -> cli -> envs -> agents.
+"""The layers read upwards only: config -> physics -> spread -> viz -> fit -> studies -> cli -> envs -> agents.
 
 A module may import its own layer and the ones below it, never one above: the core
 (spreadgym/) needs neither gymnasium nor the envs and agents, the envs never need the
@@ -14,19 +14,20 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LAYERS = (  # lowest first; errors and report are plain helpers every layer may use
-    ("spreadgym.errors", "spreadgym.report"),
+LAYERS = (  # lowest first; errors, report and threads are plain helpers every layer may use
+    ("spreadgym.errors", "spreadgym.report", "spreadgym.threads"),
     ("spreadgym.config",),
     ("spreadgym.physics",),
     ("spreadgym.spread",),
     ("spreadgym.viz",),
+    ("spreadgym.fit",),  # fitting a scene to a tray test: runs the spread chain, draws with viz
     ("spreadgym.studies",),
     ("spreadgym.cli",),
     ("spreadgym.envs",),
     ("spreadgym.agents",),
 )
 FOLDERS = {"spreadgym": "spreadgym", "envs": "spreadgym.envs", "agents": "spreadgym.agents"}
-CORE_TESTS = ("config", "physics", "spread", "viz", "studies", "cli")
+CORE_TESTS = ("config", "physics", "spread", "viz", "fit", "studies", "cli")
 
 
 def layer(module: str) -> int:

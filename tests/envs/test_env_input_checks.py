@@ -123,3 +123,16 @@ def test_docs_list_the_accepted_range_of_every_key_as_the_schemas_say():
     assert doc.read_text(encoding="utf-8") == config_keys_markdown(), \
         "docs/config-keys.md is stale: python -m spreadgym.envs.config_doc > docs/config-keys.md"
     assert "| `flight.wind_m_s` |" in doc.read_text() and "each >= -20, <= 20" in doc.read_text()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_a_first_reset_that_fails_leaves_a_default_made_env_usable(env_id):
+    """The issue's sequence as a user meets it: `gym.make` with its defaults, a first reset
+    refused, then a good reset and a step (gymnasium's passive checker broke it: it is off
+    by default in the registry, envs/registration.py)."""
+    env = gym.make(env_id, granules=64)
+    with pytest.raises(ConfigError, match="options.context.fertilizer"):
+        env.reset(seed=1, options={"context": {"fertilizer": "nope"}})
+    env.reset(seed=1)
+    _, reward, _, _, _ = env.step(np.zeros(env.action_space.shape))
+    assert np.isfinite(reward)
