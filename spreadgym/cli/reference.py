@@ -11,7 +11,7 @@ from spreadgym.cli import arguments
 from spreadgym.cli.simulate import precision_flag
 from spreadgym.config.overrides import parse_assignments
 from spreadgym.config.scene import load_scene
-from spreadgym.errors import SpreadgymError
+from spreadgym.errors import ConfigError, SpreadgymError
 from spreadgym.physics.selection import MODELS
 from spreadgym.report import format_table, print_json, with_error
 from spreadgym.spread.precision import REFERENCE_MAX_RUNS, REFERENCE_PRECISION_PP, reference_precisely
@@ -48,7 +48,12 @@ def run(args: argparse.Namespace) -> int:
         if args.granules < 1:
             raise SpreadgymError(f"--granules: {args.granules} must be at least 1")
         overrides["sim.granules"] = args.granules
-    scene = load_scene(args.scene, overrides)
+    try:
+        scene = load_scene(args.scene, overrides)
+    except ConfigError as exc:  # the flag that set the key, where one did
+        if args.granules is not None and exc.key == "sim.granules":
+            raise SpreadgymError(f"--granules: {exc.message}") from None
+        raise
     with tqdm(desc="reference", unit="run", file=sys.stderr, disable=None, leave=False) as bar:
         reference = reference_precisely(scene, args.precision, args.max_runs, model=args.model,
                                         progress=lambda done, _cap: bar.update(done - bar.n), runs=args.replicates)

@@ -95,3 +95,9 @@ def test_pooled_tray_masses_give_the_reference_of_pooled_landings():
     for key in ("cv_percent_at_target", "cv_standard_error_percent", "cv_raw_percent"):
         assert by_masses[key] == pytest.approx(by_landings[key], rel=1e-9), key
     assert by_masses["trays"]["center_m"].tolist() == by_landings["trays"]["center_m"].tolist()
+
+
+def test_reference_names_its_flag_when_granules_exceed_the_work_bound(capsys):
+    assert main(["reference", "--granules", "1000000", "--replicates", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("spreadgym reference: error: --granules:") and "\n" not in err
