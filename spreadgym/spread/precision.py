@@ -26,10 +26,11 @@ from typing import Callable, Optional
 import numpy as np
 
 from spreadgym.config.materials import MaterialLibrary, load_library
-from spreadgym.config.scene import Scene
+from spreadgym.config.scene import MAX_GRANULE_COPIES, Scene, granule_copies
 from spreadgym.errors import SpreadgymError
 from spreadgym.physics.granules import replicate_sizes
 from spreadgym.spread import estimate, pattern
+from spreadgym.spread.batch import run_batch
 from spreadgym.spread.pipeline import SimulationResult, run_scene
 from spreadgym.spread.reference import MIN_RUNS, Reference, reference_from
 
@@ -61,22 +62,19 @@ def runs_needed(standard_error_pp: Optional[float], runs: int, precision_pp: flo
     return min(max(wanted, runs + 1), max_runs)
 
 
-def pool_until_precise(add_run: Callable[[], Optional[float]], precision_pp: float, max_runs: int,
+def pool_until_precise(add_runs: Callable[[int], Optional[float]], precision_pp: float, max_runs: int,
                        pilot_runs: int = PILOT_RUNS) -> int:
-    """Call `add_run()` (one more independent run pooled; it returns the pooled standard
+    """Call `add_runs(n)` (n more independent runs pooled; it returns the pooled standard
     error, None if unknown) by the rule of this module; returns the number of runs made.
     A pilot of `max_runs` runs is a fixed count: exactly that many."""
     if max_runs < pilot_runs:
         raise SpreadgymError(f"max runs: {max_runs} must be at least the {pilot_runs} pilot runs")
-    runs, se = 0, None
-    for _ in range(pilot_runs):
-        se = add_run()
-        runs += 1
+    runs = pilot_runs
+    se = add_runs(pilot_runs)
     target = runs_needed(se, runs, precision_pp, max_runs)
     while runs < target:
-        while runs < target:
-            se = add_run()
-            runs += 1
+        se = add_runs(target - runs)
+        runs = target
         target = runs_needed(se, runs, precision_pp, max_runs)
     return runs
 
@@ -207,10 +205,7 @@ def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, lib
     masses = PooledMasses(p.tray_width_m)
     pool = _Pool()
 
-    def add_run() -> Optional[float]:
-        j = pool.runs
-        result = run_scene(scene, model=model, library=library, ci=False, tracks=tracks if j == 0 else 0,
-                           first_replicate=j * per_run)
+    def add(result: SimulationResult) -> None:
         pool.first = pool.first or result
         pool.runs += 1
         masses.add(result.replicate_masses_kg)
@@ -223,9 +218,23 @@ def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, lib
             pool.outcomes[key] = pool.outcomes.get(key, 0) + count
         if progress:
             progress(pool.runs, max_runs)
+
+    def add_runs(count: int) -> Optional[float]:
+        """Runs pool.runs .. + count, side by side (spread.batch: the same bits as one by one),
+        in batches that hold at most MAX_GRANULE_COPIES landing points; run 0 keeps `tracks` paths."""
+        todo = list(range(pool.runs, pool.runs + count))
+        if todo[0] == 0 and tracks:
+            add(run_scene(scene, model=model, library=library, ci=False, tracks=tracks))
+            todo = todo[1:]
+        per_batch = max(1, MAX_GRANULE_COPIES // granule_copies(scene))
+        for start in range(0, len(todo), per_batch):
+            chunk = todo[start:start + per_batch]
+            for result in run_batch([scene] * len(chunk), model=model, library=library, ci=False,
+                                    first_replicate=[j * per_run for j in chunk]):
+                add(result)
         return estimate.estimate_cv(masses.masses(), p.tray_width_m, p.target_swath_m, p.driving).standard_error_percent
 
-    pool_until_precise(add_run, precision_pp, max_runs, pilot_runs)
+    pool_until_precise(add_runs, precision_pp, max_runs, pilot_runs)
     return pool, masses
 
 

@@ -21,14 +21,15 @@ def precise_draw(name: str, seed: int, precision_pp: float, max_runs: int = 400)
     rng = np.random.default_rng(seed)
     pooled = precision.PooledMasses(TRAY_M)
 
-    def add_run():
-        x = np.clip(sample(rng, GRANULES_PER_RUN), -HALF_WIDTH_M, HALF_WIDTH_M)
-        replicate = np.arange(GRANULES_PER_RUN) % REPLICATES_PER_RUN
-        _, masses = estimate.replicate_tray_masses(x, 1.0, replicate, REPLICATES_PER_RUN, TRAY_M, HALF_WIDTH_M)
-        pooled.add(masses)
+    def add_runs(count):
+        for _ in range(count):
+            x = np.clip(sample(rng, GRANULES_PER_RUN), -HALF_WIDTH_M, HALF_WIDTH_M)
+            replicate = np.arange(GRANULES_PER_RUN) % REPLICATES_PER_RUN
+            _, masses = estimate.replicate_tray_masses(x, 1.0, replicate, REPLICATES_PER_RUN, TRAY_M, HALF_WIDTH_M)
+            pooled.add(masses)
         return estimate.estimate_cv(pooled.masses(), TRAY_M, width, driving).standard_error_percent
 
-    runs = precision.pool_until_precise(add_run, precision_pp, max_runs)
+    runs = precision.pool_until_precise(add_runs, precision_pp, max_runs)
     return estimate.estimate_cv(pooled.masses(), TRAY_M, width, driving), runs
 
 
@@ -78,6 +79,17 @@ def test_pooled_runs_are_the_one_run_of_all_their_granules():
     np.testing.assert_allclose(result.masses, whole.replicate_masses_kg, rtol=1e-12, atol=1e-18)
     assert result.at_target.cv_percent == pytest.approx(whole.metrics.cv_percent_at_target, rel=1e-9)
     assert result.to_json()["granules_simulated"] == 1024
+
+
+def test_runs_in_batches_equal_runs_one_by_one_and_the_first_keeps_its_paths():
+    """simulate pools its runs through spread.batch: the same bits as run_scene run by run."""
+    scene = scene_with(load_scene("paper"), {"sim.granules": 512, "sim.seed": 9})
+    result = precision.simulate_precisely(scene, precision_pp=0.001, max_runs=4, tracks=3)
+    one_by_one = precision.PooledMasses(scene.pattern.tray_width_m)
+    for j in range(4):
+        one_by_one.add(run_scene(scene, ci=False, first_replicate=8 * j).replicate_masses_kg)
+    assert np.array_equal(result.masses, one_by_one.masses())
+    assert len(result.first.departure.tracks) == 3
 
 
 def test_simulate_precisely_reaches_the_precision_asked_and_is_deterministic():
