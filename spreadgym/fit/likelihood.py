@@ -1,0 +1,123 @@
+"""The likelihood of a tray test given a simulated pattern: catch noise on the shape.
+
+A tray test measures the shape of the pattern, not the rate (how much the machine let
+out during the pass is rarely known), so the scale is free. Per tray i with a catch
+(m_i > 0):
+
+    log m_i = a + log mu_i(theta) + e_i,   e_i ~ N(0, s_i^2),   s_i^2 = sigma^2 + v_sim,i + v_count,i
+
+* mu_i(theta): the simulated single-pass mass under tray i (pass lanes shifted and,
+  for back-and-forth driving, mirrored), plus half a landing sample's mass so an
+  empty simulated tray stays finite;
+* a: the log scale, profiled out (weighted mean of the residuals);
+* sigma: the multiplicative catch noise (tray placement, losses, weighing), unknown,
+  estimated from the residuals;
+* v_sim,i: the relative variance of mu_i from the simulation's independent replicates
+  (its Monte Carlo error, fixed across theta by common random numbers: sim.seed fixed);
+* v_count,i = m_g / m_i: the counting noise of a tray holding m_i / m_g granules
+  (m_g the mass-weighted mean granule mass of the scene's fertilizer).
+Trays that caught nothing carry no log-shape and are left out of the sum.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from spreadgym.config.scene import Scene, scene_with
+from spreadgym.fit.space import FitSpace
+from spreadgym.fit.trays import TrayTest
+from spreadgym.spread.batch import run_batch
+from spreadgym.spread.pipeline import SimulationResult
+
+SIGMA_BOUNDS = (1e-3, 3.0)  # catch noise s.d. of log mass: 0.1 % .. 300 %
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """A simulated pattern on the measured trays (the rows that caught something)."""
+
+    log_mu: np.ndarray  # (n,) log simulated mass, kg (floored)
+    variance: np.ndarray  # (n,) v_sim + v_count, relative (log scale)
+
+
+class PatternModel:
+    """Simulated patterns of `scene` at points of `space`, on the trays of `test`.
+
+    Every evaluation uses the same granules (the scene's sim.seed): common random numbers,
+    so the likelihood changes smoothly with the parameters. Results are cached by point."""
+
+    def __init__(self, scene: Scene, space: FitSpace, test: TrayTest, model: str = "auto"):
+        self.scene, self.space, self.test, self.model = scene, space, test, model
+        caught = test.mass_kg > 0
+        self.rows = np.flatnonzero(caught)
+        self.log_mass = np.log(test.mass_kg[caught])
+        p = scene.pattern
+        local = test.x_m[caught] - test.lane[caught] * p.target_swath_m  # in each pass's own frame
+        mirrored = (p.driving == "back-and-forth") & (test.lane[caught] % 2 == 1)
+        self.local_index = np.rint(np.where(mirrored, -local, local) / p.tray_width_m).astype(np.int64)
+        self.evaluations = 0
+        self._cache: dict[tuple, Prediction] = {}
+
+    @property
+    def trays(self) -> int:
+        return int(self.rows.size)
+
+    def scene_at(self, unit: Sequence[float]) -> Scene:
+        return scene_with(self.scene, self.space.overrides(unit))
+
+    def predict(self, units: Sequence[Sequence[float]]) -> list[Prediction]:
+        """Predictions at unit-cube points, the uncached ones simulated in one batch."""
+        keys = [_key(u) for u in units]
+        todo = list(dict.fromkeys(k for k in keys if k not in self._cache))
+        if todo:
+            results = run_batch([self.scene_at(k) for k in todo], model=self.model, ci=False)
+            self.evaluations += len(todo)
+            for key, result in zip(todo, results):
+                self._cache[key] = self.prediction(result)
+        return [self._cache[k] for k in keys]
+
+    def prediction(self, result: SimulationResult) -> Prediction:
+        """A run's pattern on the measured trays, with its Monte Carlo and counting variances."""
+        replicates = result.replicate_masses_kg
+        k, count = replicates.shape
+        index = self.local_index + count // 2
+        inside = (index >= 0) & (index < count)
+        per = np.zeros((k, self.trays))
+        per[:, inside] = replicates[:, index[inside]]
+        pooled = per.sum(axis=0)
+        floor = 0.5 * float(np.mean(result.sample.mass_kg)) if result.sample.mass_kg.size else 1e-12
+        spread = k / (k - 1) * np.sum((per - pooled / k) ** 2, axis=0) if k > 1 else pooled ** 2
+        mu = pooled + floor
+        v_sim = (spread + floor ** 2) / mu ** 2
+        masses = result.granules.mass_kg
+        granule_kg = float(np.sum(masses ** 2) / np.sum(masses))  # mass-weighted mean granule mass
+        v_count = granule_kg / self.test.mass_kg[self.rows]
+        return Prediction(np.log(mu), v_sim + v_count)
+
+
+def _key(unit: Sequence[float]) -> tuple:
+    return tuple(round(float(u), 12) for u in np.clip(unit, 0.0, 1.0))
+
+
+def residuals(y: np.ndarray, prediction: Prediction, sigma: float) -> tuple[np.ndarray, float]:
+    """Standardised residuals (y - a - log mu) / s with the log scale `a` profiled out; and `a`."""
+    weight = 1.0 / (sigma ** 2 + prediction.variance)
+    gap = y - prediction.log_mu
+    a = float(np.sum(weight * gap) / np.sum(weight))
+    return (gap - a) * np.sqrt(weight), a
+
+
+def catch_sigma(y: np.ndarray, prediction: Prediction) -> float:
+    """Maximum-likelihood catch-noise s.d. (log scale) at one prediction."""
+    def nll(log_sigma: float) -> float:
+        sigma = float(np.exp(log_sigma))
+        r, _ = residuals(y, prediction, sigma)
+        return float(np.sum(r ** 2) + np.sum(np.log(sigma ** 2 + prediction.variance)))
+
+    lo, hi = np.log(SIGMA_BOUNDS)
+    return float(np.exp(minimize_scalar(nll, bounds=(lo, hi), method="bounded",
+                                        options={"xatol": 1e-4}).x))

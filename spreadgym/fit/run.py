@@ -1,0 +1,84 @@
+"""One fit, end to end: estimate, intervals, identifiability, the fitted scene."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from spreadgym.config.scene import Scene, scene_with
+from spreadgym.errors import SpreadgymError
+from spreadgym.fit import optimise, uncertainty
+from spreadgym.fit.likelihood import PatternModel, residuals
+from spreadgym.fit.space import FitSpace
+from spreadgym.fit.trays import TrayTest
+
+FIT_GRANULES = 4096  # granules per evaluation (x sim.angle_copies landing samples)
+
+
+@dataclass
+class FitResult:
+    """A fitted tray test; values in each key's own unit."""
+
+    scene: Scene  # the scene as given (settings of the test)
+    space: FitSpace
+    model: PatternModel
+    estimate: np.ndarray  # (d,)
+    low: np.ndarray  # (d,) 90 % profile interval
+    high: np.ndarray
+    interval_points: list[np.ndarray]  # the profile ends (unit cube), 2 per key: the band's corners
+    open_ends: list[tuple[bool, bool]]  # the interval reached the search bound (low, high)
+    identifiable: dict[str, bool]
+    correlation: np.ndarray  # (d, d)
+    weakest: dict[str, float]  # unit-cube direction the test determines least
+    weakest_eigenvalue: float
+    catch_sd: float  # estimated catch noise (log s.d.)
+    log_scale: float  # a: fitted mass = exp(a) x simulated mass
+    cost: float  # sum of squared standardised residuals at the estimate
+    threshold: float  # its rise bounding the 90 % intervals
+    wall_s: float
+
+    @property
+    def fitted_scene(self) -> Scene:
+        """The scene as given with the estimates set (its own sim keys)."""
+        return scene_with(self.scene, dict(zip(self.space.keys, map(float, self.estimate))))
+
+    @property
+    def evaluation_scene(self) -> Scene:
+        """The fitted scene as the fit simulated it (its granules and seed)."""
+        return self.model.scene_at(self.space.unit(self.estimate))
+
+
+def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "auto",
+                  granules: Optional[int] = FIT_GRANULES, seed: int = 0) -> FitResult:
+    """Fit the keys of `space` to `test`; the evaluations use `granules` granules (None: the
+    scene's) and the scene's sim.seed for every point (common random numbers); `seed` draws
+    the Sobol start design."""
+    started = time.perf_counter()
+    evaluation = scene if granules is None else scene_with(scene, {"sim.granules": granules})
+    pattern_model = PatternModel(evaluation, space, test, model)
+    if pattern_model.trays < space.dims + 3:
+        raise SpreadgymError(f"--trays: {pattern_model.trays} trays caught anything; fitting {space.dims} key(s) "
+                             f"needs at least {space.dims + 3}")
+    objective, best = optimise.fit(pattern_model, seed)
+    level = uncertainty.threshold(pattern_model.trays, space.dims)
+    info = uncertainty.information(objective, best)
+    low, high, points, open_ends, identifiable = [], [], [], [], {}
+    for j, key in enumerate(space.keys):
+        interval = uncertainty.profile_interval(objective, best, j, level, info)
+        low.append(interval.low)
+        high.append(interval.high)
+        points += [interval.low_point, interval.high_point]
+        open_ends.append((interval.low_open, interval.high_open))
+        identifiable[key] = bool(interval.high - interval.low <= uncertainty.IDENTIFIABLE_SHARE)
+    direction, eigenvalue = uncertainty.weakest_direction(info)
+    _, log_scale = residuals(pattern_model.log_mass, pattern_model.predict([best.unit])[0], objective.sigma)
+    return FitResult(
+        scene=scene, space=space, model=pattern_model, estimate=space.values(best.unit),
+        low=space.values(np.array(low)), high=space.values(np.array(high)), interval_points=points,
+        open_ends=open_ends, identifiable=identifiable, correlation=uncertainty.correlations(info),
+        weakest={k: float(v) for k, v in zip(space.keys, direction)}, weakest_eigenvalue=float(eigenvalue),
+        catch_sd=objective.sigma, log_scale=log_scale, cost=best.cost, threshold=level,
+        wall_s=time.perf_counter() - started)
