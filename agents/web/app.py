@@ -7,6 +7,7 @@ plotly.min.js from the plotly package, so the pages need no network.
 
 from __future__ import annotations
 
+import threading
 from contextlib import asynccontextmanager
 from importlib import resources
 from pathlib import Path
@@ -80,7 +81,10 @@ def create_app(charts_dir: Path = Path("out/charts")) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(_app):
+        warm = threading.Thread(target=pattern.warm_up, daemon=True)  # the first page answers at once
+        warm.start()
         yield
+        await run_in_threadpool(warm.join)
         await run_in_threadpool(jobs.shutdown)
 
     app = FastAPI(title="spreadgym", lifespan=lifespan, docs_url=None, redoc_url=None, openapi_url=None)

@@ -132,7 +132,9 @@ class ChartJobRequest(BaseModel):
 
 
 def _job(options: dict, out: str, events) -> None:
-    """The job's process: `spreadgym chart` with progress reported on `events`."""
+    """The job's process: `spreadgym chart` with progress reported on `events`, in a process
+    group of its own (so whatever Ray leaves behind is stopped with it)."""
+    os.setsid()
     from spreadgym.agents.chart import chart
 
     try:
@@ -147,6 +149,14 @@ def _job(options: dict, out: str, events) -> None:
         events.put(("failed", f"{type(exc).__name__}: {exc}"))
 
 
+def _stop_group(leader: int) -> None:
+    """Kill what is left of a finished job's process group (Ray's helpers after an interrupted start)."""
+    try:
+        os.killpg(leader, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
 class ChartJobs:
     """One chart job at a time: start (checked first, as the CLI checks), status, cancel."""
 
@@ -158,7 +168,8 @@ class ChartJobs:
         self.status: dict = {"state": "idle"}
 
     def running(self) -> bool:
-        return self.process is not None and self.process.is_alive()
+        """A job started and not yet reported finished, failed or cancelled."""
+        return self.status["state"] == "running"
 
     def start(self, request: ChartJobRequest) -> dict:
         from spreadgym.agents.chart.spec import make_spec
@@ -205,6 +216,7 @@ class ChartJobs:
             except queue.Empty:
                 if process.is_alive():
                     continue
+                _stop_group(process.pid)
                 with self.lock:
                     if self.status["state"] == "running" and self.cancelling:
                         self.status.update(state="cancelled", message="cancelled", ended=time.time())
@@ -217,19 +229,24 @@ class ChartJobs:
                     continue
                 self.status.update(state=kind, message=text, ended=time.time())
             process.join(timeout=CANCEL_WAIT_S)
+            _stop_group(process.pid)
             return
 
     def cancel(self) -> dict:
         """Interrupt the running job as Ctrl-C would; terminate it if it does not end in time."""
         process = self.process
-        if process is None or not process.is_alive():
+        if process is None or not self.running():
             raise SpreadgymError("chart job: none is running")
         self.cancelling = True
-        os.kill(process.pid, signal.SIGINT)
+        try:
+            os.kill(process.pid, signal.SIGINT)
+        except ProcessLookupError:  # it ended just now
+            pass
         process.join(timeout=CANCEL_WAIT_S)
         if process.is_alive():
             process.terminate()
             process.join(timeout=5.0)
+        _stop_group(process.pid)
         with self.lock:
             if self.status["state"] == "running":
                 self.status.update(state="cancelled", message="cancelled; finished cells kept", ended=time.time())

@@ -207,6 +207,11 @@ def plot_data(scene: Scene, precise) -> dict:
     return {"plan": plan, "landing": _xy(landing[keep]) if len(keep) else [[], []], "trays": tray_data}
 
 
+def warm_up() -> None:
+    """One small run of the default scene, so the compiled model is loaded before the first page."""
+    simulate(SimulateRequest(set={"sim.granules": 256}, max_runs=2), tracks=TRACKS)
+
+
 def pattern_payload(request: SimulateRequest) -> str:
     """`POST /api/pattern`: the simulate JSON ("metrics"), the CV as the CLI prints it and the pictures' data."""
     scene, precise = simulate(request, tracks=TRACKS)

@@ -3,6 +3,7 @@ JSON), bad input as 422 naming the key, chart folders confined to --charts, the 
 and a cancelled chart job that leaves the server working."""
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -170,16 +171,23 @@ def test_a_cancelled_chart_job_leaves_the_server_working(client, charts_dir):
     bad = client.post("/api/chart-jobs", json={"scene": "paper", "fertilizers": "pellet", "widths": "3",
                                                "out": "../job"})
     assert bad.status_code == 422 and "--out" in bad.json()["error"]
-    job = {"scene": "paper", "fertilizers": "pellet", "widths": "3,4", "out": "job", "budget": 50,
-           "granules": 256, "workers": 1}
+    job = {"scene": "paper", "fertilizers": "pellet", "widths": "3,3.5,4,4.5", "out": "job", "budget": 5,
+           "granules": 128, "workers": 1}
     started = client.post("/api/chart-jobs", json=job)
     assert started.status_code == 200, started.text
-    assert started.json()["state"] == "running" and started.json()["total"] == 2
+    assert started.json()["state"] == "running" and started.json()["total"] == 4
     assert client.post("/api/chart-jobs", json=job).status_code == 422  # one at a time
-    time.sleep(2.0)
+    deadline = time.monotonic() + 180
+    while client.get("/api/chart-jobs").json()["done"] < 1 and time.monotonic() < deadline:
+        time.sleep(0.5)  # cancelled while Ray runs its cells
+    leader = client.app.state.jobs.process.pid
     cancelled = client.delete("/api/chart-jobs")
     assert cancelled.status_code == 200 and cancelled.json()["state"] == "cancelled"
     assert client.delete("/api/chart-jobs").status_code == 422  # nothing left to cancel
+    with pytest.raises(ProcessLookupError):  # nothing of the job's process group is left (Ray's helpers)
+        os.killpg(leader, 0)
     assert client.get("/api/health").json() == {"ok": True}
     assert client.post("/api/simulate", json={"set": SMALL}).status_code == 200
     assert not (charts_dir / "job" / "chart.json").exists()
+    listed = {c["name"]: c for c in client.get("/api/charts").json()["charts"]}
+    assert not listed["job"]["finished"] and listed["job"]["cells"] >= 1  # finished cells kept

@@ -76,12 +76,15 @@ function showJob(s) {
   $("job-progress").value = s.done || 0;
 }
 
+let lastState = null;
+
 async function poll() {
   try {
     const s = await api("/api/chart-jobs");
     showJob(s);
     if (s.state === "running") setTimeout(poll, 1000);
-    else listCharts();
+    else if (lastState === "running") listCharts();  // the job's folder appears or changes
+    lastState = s.state;
   } catch (err) {
     $("error").textContent = err.message;
   }

@@ -2,6 +2,7 @@
 "use strict";
 const $ = (id) => document.getElementById(id);
 const state = { scene: null, yaml: null, info: null, precise: null, sent: 0, shown: 0, busy: false, next: null };
+const CONFIG = { displayModeBar: false };  // drag zooms, a double click resets
 const LAYOUT = { margin: { l: 50, r: 10, t: 30, b: 40 }, font: { size: 11 }, showlegend: true,
   legend: { orientation: "h", y: -0.2 } };
 
@@ -88,15 +89,15 @@ function drawPlan(plan) {
   ];
   if (plan.plates.length) traces.push({ ...joined(plan.plates), mode: "lines", name: "deflector plates",
     line: { color: "#8c564b", width: 5 } });
-  Plotly.react("plan", traces, { ...LAYOUT, title: "Plan view", shapes,
-    xaxis: { range: [-lim, lim], title: "x, across (m)" },
-    yaxis: { range: [-lim, lim], scaleanchor: "x", title: "y, forward (m)" } }, { displaylogo: false });
+  Plotly.react("plan", traces, { ...LAYOUT, title: { text: "Plan view" }, shapes,
+    xaxis: { range: [-lim, lim], title: { text: "x, across (m)" } },
+    yaxis: { range: [-lim, lim], scaleanchor: "x", title: { text: "y, forward (m)" } } }, CONFIG);
 }
 
 function drawPattern(trays, m) {
   const W = m.target_swath_m;
   if (!trays.single_percent) {
-    Plotly.react("pattern", [], { ...LAYOUT, title: "Transverse pattern: nothing landed" });
+    Plotly.react("pattern", [], { ...LAYOUT, title: { text: "Transverse pattern: nothing landed" } });
     return;
   }
   Plotly.react("pattern", [
@@ -104,11 +105,11 @@ function drawPattern(trays, m) {
       width: 0.9 * trays.width_m },
     { x: trays.overlap_x_m, y: trays.overlap_percent, mode: "lines", line: { shape: "hvh", color: "#08519c" },
       name: "overlapped at " + W + " m" },
-  ], { ...LAYOUT, title: "Transverse pattern (" + m.driving + ")",
+  ], { ...LAYOUT, title: { text: "Transverse pattern (" + m.driving + ")" },
     shapes: [{ type: "rect", x0: -W / 2, x1: W / 2, y0: 0, y1: 1, yref: "paper", fillcolor: "#fff2cc",
       line: { width: 0 }, layer: "below" }],
-    xaxis: { title: "x, across (m)" }, yaxis: { title: "rate (% of mean at the width)", rangemode: "tozero" } },
-  { displaylogo: false });
+    xaxis: { title: { text: "x, across (m)" } }, yaxis: { title: { text: "rate (% of mean at the width)" }, rangemode: "tozero" } },
+  CONFIG);
 }
 
 function drawCurve(m) {
@@ -128,16 +129,16 @@ function drawCurve(m) {
       marker: { symbol: "star", size: 13, color: "#ffd700", line: { color: "black", width: 1 } },
       error_y: se === null ? undefined : { type: "data", array: [se], color: "black" } });
   }
-  Plotly.react("curve", traces, { ...LAYOUT, title: "CV against working width",
-    xaxis: { title: "working width (m)", range: [0, right] }, yaxis: { title: "CV (%)", range: [0, top] } },
-  { displaylogo: false });
+  Plotly.react("curve", traces, { ...LAYOUT, title: { text: "CV against working width" },
+    xaxis: { title: { text: "working width (m)" }, range: [0, right] }, yaxis: { title: { text: "CV (%)" }, range: [0, top] } },
+  CONFIG);
 }
 
 function drawLanding(points, m) {
   Plotly.react("landing", [{ x: points[0], y: points[1], mode: "markers", type: "scattergl", name: "landing point",
     marker: { size: 3, color: "#6a51a3", opacity: 0.5 } }],
-  { ...LAYOUT, title: "Landing points (" + points[0].length + " shown)", showlegend: false,
-    xaxis: { title: "x, across (m)" }, yaxis: { title: "y, along (m)", scaleanchor: "x" } }, { displaylogo: false });
+  { ...LAYOUT, title: { text: "Landing points (" + points[0].length + " shown)" }, showlegend: false,
+    xaxis: { title: { text: "x, across (m)" } }, yaxis: { title: { text: "y, along (m)" }, scaleanchor: "x" } }, CONFIG);
 }
 
 function buildControls(info) {
