@@ -1,9 +1,11 @@
 """What a finished chart writes: chart.csv, chart.json, chart.md (laid out like a printed
-spreading chart), chart.png and one pattern picture per cell (cells/<key>.png)."""
+spreading chart), chart.png, chart.html (the one page an operator prints) and one
+pattern picture per cell (cells/<key>.png)."""
 
 from __future__ import annotations
 
 import csv
+import html
 import io
 import math
 from pathlib import Path
@@ -55,7 +57,7 @@ def write_chart(store: ChartStore, records: list[dict], notes: list[str]) -> tup
     for row in rows:
         writer.writerow({k: ("" if row.get(k) is None else row[k]) for k in cols})
     contents = (buffer.getvalue(), json_text(payload), markdown(spec, payload),
-                chart_figure(spec, rows, payload["cv_threshold_percent"]))
+                chart_figure(spec, rows, payload["cv_threshold_percent"]), printable(spec, payload))
     return [write_atomic(store.out / name, content) for name, content in zip(CHART_FILES, contents)], payload
 
 
@@ -84,10 +86,11 @@ def markdown(spec: ChartSpec, payload: dict) -> str:
     names = [c for c in payload["columns"] if c not in HEAD and c not in TAIL]
     by_cell = {(r["fertilizer"], r["width_m"]): r for r in rows}
     lines = [f"# Spreading chart: scene {spec.scene['name']}, {spec.driving} driving", "",
-             f"Settings found by CMA-ES on the {spec.search_model} model ({spec.budget} simulations of "
-             f"{spec.granules} granules per cell), verified with the {spec.verify_model} model "
+             f"{method_text(spec)}, verified with the {spec.verify_model} model "
              f"({spec.verify_runs} runs of {spec.granules} granules pooled). CV at the working width "
-             f"± its standard error; cells above the {threshold:g} % threshold are marked ✗.", "",
+             f"± its standard error, and p{quantile_text(spec)}: the CV {quantile_text(spec)} % of batches stay "
+             f"under ({spec.variability['verify_draws']} batches of the variability model, one run each); "
+             f"cells above the {threshold:g} % threshold are marked ✗.", "",
              "| width | " + " | ".join(spec.fertilizers) + " |",
              "|---|" + "---|" * len(spec.fertilizers)]
     for width in spec.widths_m:
@@ -98,7 +101,8 @@ def markdown(spec: ChartSpec, payload: dict) -> str:
                 cells.append("-")
                 continue
             cv = "no CV" if r["cv_percent"] is None else (
-                f"CV {r['cv_percent']:.1f} ± {_fmt(r['cv_standard_error_percent'], 2)} %")
+                f"CV {r['cv_percent']:.1f} ± {_fmt(r['cv_standard_error_percent'], 2)} %, "
+                f"p{quantile_text(spec)} {r['cv_p90_percent']:.1f} %")
             mark = "" if r["cv_percent"] is not None and r["cv_percent"] <= threshold else " ✗"
             cells.append(f"{settings_text(r, names)}<br>{cv}{mark}")
         lines.append(f"| {width:g} m | " + " | ".join(cells) + " |")
@@ -106,6 +110,91 @@ def markdown(spec: ChartSpec, payload: dict) -> str:
         f"{f} {'none of these' if w is None else f'{w:g} m'}" for f, w in payload["widest_width_m"].items()) + "."]
     lines += [f"- {note}" for note in payload["notes"]]
     return "\n".join(lines) + "\n"
+
+
+def quantile_text(spec: ChartSpec) -> str:
+    return f"{100 * spec.variability['quantile']:g}"
+
+
+def method_text(spec: ChartSpec) -> str:
+    """How the settings were found, in a sentence's words."""
+    aim = (f"the p{quantile_text(spec)} CV over {spec.variability['draws']} batches of the variability model"
+           if spec.objective == "robust" else "the nominal CV")
+    search = (f"CMA-ES on the {spec.search_model} model ({spec.budget} candidates of {spec.granules} granules "
+              f"per cell, aiming at {aim})")
+    if spec.method == "policy":
+        return "Settings proposed by a trained policy (no search)"
+    if spec.method == "policy+search":
+        return f"Settings found by {search}, started at a trained policy's proposal"
+    return f"Settings found by {search}"
+
+
+PRINT_CSS = """
+body { font-family: Helvetica, Arial, sans-serif; margin: 1.2cm; color: #111; }
+h1 { font-size: 16pt; margin: 0 0 4pt 0; }
+h2 { font-size: 12pt; margin: 12pt 0 4pt 0; }
+p { font-size: 8.5pt; margin: 2pt 0; }
+table { border-collapse: collapse; width: 100%; font-size: 9.5pt; }
+th, td { border: 1px solid #777; padding: 2pt 5pt; text-align: right; }
+th { background: #e8e8e8; }
+td.width, th.width { text-align: left; font-weight: bold; }
+tr.over td { color: #a00; }
+@page { size: A4 portrait; margin: 1cm; }
+@media print { body { margin: 0; } h2 { break-after: avoid; } table { break-inside: avoid; } }
+"""
+
+
+def _dial(row: dict, name: str) -> str:
+    value = row[name]
+    if name == "rpm":
+        return f"{value:.0f}"
+    if name.endswith("_deg"):
+        return f"{value:.1f}"
+    return f"{1000 * value:.0f}" if name.endswith("_m") else f"{value:.3g}"
+
+
+def _heading(name: str) -> str:
+    if name == "rpm":
+        return "disc speed (rpm)"
+    if name.endswith("_deg"):
+        return f"{name[:-4].replace('_', ' ')} (°)"
+    return f"{name[:-2].replace('_', ' ')} (mm)"
+
+
+def printable(spec: ChartSpec, payload: dict) -> str:
+    """chart.html: one printable page, a table per fertilizer, a row per width with the
+    settings to dial and the expected CV band (nominal ± SE and the p90); no network."""
+    rows, threshold = payload["rows"], payload["cv_threshold_percent"]
+    names = [c for c in payload["columns"] if c not in HEAD and c not in TAIL]
+    q = quantile_text(spec)
+    esc = html.escape
+    parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+             f"<title>Spreading chart: {esc(spec.scene['name'])}</title><style>{PRINT_CSS}</style></head><body>",
+             f"<h1>Spreading chart: {esc(spec.scene['name'])}, {esc(spec.driving)} driving</h1>",
+             f"<p>{esc(method_text(spec))}. Expected CV at the working width: nominal ± standard error "
+             f"({esc(spec.verify_model)} model, {spec.verify_runs} runs of {spec.granules} granules), and the CV "
+             f"{q} % of batches stay under (p{q}: fertilizer friction, restitution, size and density, disc speed "
+             f"and vane pitch varied as the variability model says). Rows in red exceed the {threshold:g} % "
+             "threshold.</p>"]
+    for fertilizer in spec.fertilizers:
+        mine = sorted((r for r in rows if r["fertilizer"] == fertilizer), key=lambda r: r["width_m"])
+        widest = payload["widest_width_m"].get(fertilizer)
+        parts.append(f"<h2>{esc(fertilizer)}" + ("" if widest is None else f" (up to {widest:g} m)") + "</h2>")
+        parts.append('<table><tr><th class="width">width (m)</th>'
+                     + "".join(f"<th>{esc(_heading(n))}</th>" for n in names)
+                     + f"<th>CV (%)</th><th>p{q} CV (%)</th></tr>")
+        for r in mine:
+            cv = r["cv_percent"]
+            over = cv is None or cv > threshold
+            band = "-" if cv is None else f"{cv:.1f} ± {_fmt(r['cv_standard_error_percent'], 2)}"
+            tr = '<tr class="over">' if over else "<tr>"
+            parts.append(f'{tr}<td class="width">{r["width_m"]:g}</td>'
+                         + "".join(f"<td>{_dial(r, n)}</td>" for n in names)
+                         + f"<td>{band}</td><td>{r['cv_p90_percent']:.1f}</td></tr>")
+        parts.append("</table>")
+    parts += [f"<p>{esc(note)}</p>" for note in payload["notes"]]
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
 
 
 def _figure(figsize):

@@ -7,8 +7,10 @@ machine, with an object store sized to the chart's results; a failed start is on
 Everything that can be checked before the work is (the folder, the files to come, the
 address, Ray's start), and a refused run leaves the folder as it was.
 
-Each finished cell is written to the chart folder as it arrives, with its pattern
-picture; a rerun skips the cells already there. Ctrl-C cancels the running tasks and
+Cells of one fertilizer (a row) run in width order, each started from its narrower
+neighbour's settings (`search.run_cell`); rows run side by side. Each finished cell is
+written to the chart folder as it arrives, with its pattern picture; a rerun skips the
+cells already there. Ctrl-C cancels the running tasks and
 stops, keeping every finished cell. The chart files (chart.csv, .json, .md, .png) are
 written only when every cell is done, so nothing half-done reads as a chart.
 """
@@ -97,21 +99,29 @@ def _first_line(exc: BaseException) -> str:
     return brief(lines[0])[1:-1] if lines else type(exc).__name__
 
 
-def cell_with_picture(spec: ChartSpec, cell: Cell) -> tuple[dict, bytes]:
-    """One cell and its pattern picture (PNG bytes), both made where the cell runs."""
-    record = run_cell(spec, cell)
+def cell_with_picture(spec: ChartSpec, cell: Cell, previous=None) -> tuple[dict, bytes]:
+    """One cell and its pattern picture (PNG bytes), both made where the cell runs.
+    `previous`: the narrower neighbour's record, or its (record, picture)."""
+    record = run_cell(spec, cell, previous[0] if isinstance(previous, tuple) else previous)
     return record, outputs.cell_picture(spec, cell, record)
 
 
-def _run_ray(spec: ChartSpec, todo: Sequence[Cell], finish: Callable[[Cell, dict, bytes], None]) -> None:
-    """The cells of `todo` as tasks of the connected Ray, each finished as it arrives."""
+def _run_ray(spec: ChartSpec, todo: Sequence[Cell], records: dict,
+             finish: Callable[[Cell, dict, bytes], None]) -> None:
+    """The cells of `todo` as tasks of the connected Ray, each finished as it arrives; a
+    cell's task waits for its narrower neighbour's (rows run side by side)."""
     import ray
 
     pending: dict = {}
     try:
         task = ray.remote(num_cpus=1)(cell_with_picture)
         spec_ref = ray.put(spec)
-        pending = {task.remote(spec_ref, cell): cell for cell in todo}
+        refs: dict = {}
+        for cell in todo:  # in spec order: a row's cells narrowest first
+            before = spec.previous(cell)
+            previous = None if before is None else records.get(before.key, refs.get(before.key))
+            refs[cell.key] = task.remote(spec_ref, cell, previous)
+            pending[refs[cell.key]] = cell
         while pending:  # short waits, so Ctrl-C is seen at once
             ready, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)
             for ref in ready:
@@ -186,10 +196,11 @@ def _run_cells(spec: ChartSpec, store: ChartStore, todo: Sequence[Cell], engine:
 
     try:
         if todo and engine == "ray":
-            _run_ray(spec, todo, finish)
+            _run_ray(spec, todo, records, finish)
         else:
             for cell in todo:
-                finish(cell, *cell_with_picture(spec, cell))
+                before = spec.previous(cell)
+                finish(cell, *cell_with_picture(spec, cell, None if before is None else records[before.key]))
     finally:
         bar.close()
 

@@ -1,5 +1,6 @@
 """One chart cell: search the scene's settings for the lowest CV at the cell's width on the
-fast objective, scored honestly, then verify the winner with the full model.
+fast objective, scored honestly, then verify the winner with the full model, at the
+nominal scene and over the variability model.
 
 * Objective (minimised): the corrected CV at the width (100 % when nothing lands) plus
   `SWATH_PENALTY_PERCENT` times the relative shortfall of the effective swath below the
@@ -9,14 +10,26 @@ fast objective, scored honestly, then verify the winner with the full model.
   threshold already means W_eff >= W; the swath penalty steers a search that is still
   above it towards wider patterns, and the mass penalty keeps it from buying evenness
   by losing mass.
+* Robust objective (the default): a candidate's score is the `quantile` (0.9) of the
+  objective over the variability model's draws (`variability`), all run in one
+  `run_batch` call; every candidate of the search is scored on the same draws (common
+  random numbers). Nominal objective: one run of the nominal scene, a fresh granule
+  sample per evaluation.
 * Search: CMA-ES over the settings box (`agents.baselines.cmaes_search`), started at the
-  scene's own settings. Honest scoring as in the baselines: every evaluation on a fresh
-  granule sample (its own seed), the search gets 1 - RESCORE_FRACTION of the budget and
-  the rest re-scores its leaders on fresh samples; the leader with the best mean wins and
-  what the search believes (`cv_search_percent`) rests on those re-scores only.
+  narrower neighbour's settings (the first width: the scene's own; `policy+search`: the
+  policy's proposal). The search gets 1 - RESCORE_FRACTION of the budget (candidates);
+  the rest re-scores its leaders, and the neighbour's settings, in rounds: each round
+  scores every leader on the same fresh samples (robust: a fresh set of draws).
+* Steady rows: among the leaders whose mean re-scored score is within two standard
+  errors (of the best leader's mean, from the spread of its rounds) of the best, the one
+  closest to the narrower neighbour's settings (in the unit box) wins. What the search
+  believes (`cv_search_percent`, the CV of its objective) rests on the re-scores only.
+* `policy`: no search; the policy's proposal is the cell's settings.
 * Verification: the winner run `verify_runs` times on the full model and pooled
   (`spread.reference`), so `cv_percent` and `cv_standard_error_percent` rest on
-  verify_runs x granules granules in as many replicates.
+  verify_runs x granules granules in as many replicates; and run once on each of
+  `verify_draws` fresh draws of the variability model on the full model: their
+  `quantile` is `cv_p90_percent`, with a bootstrap standard error over the draws.
 
 Every seed comes from the cell's seed sequence (`spec.cell_seed`): the same spec gives
 the same cell bit for bit, in any process and in any order.
@@ -30,18 +43,21 @@ from typing import Optional
 
 import numpy as np
 
-from spreadgym.agents.baselines import LEADERS, Leader, cmaes_search, leaders, split_budget
+from spreadgym.agents.baselines import CMA_SIGMA0, LEADERS, cmaes_search, leaders, split_budget
+from spreadgym.agents.chart import variability as var
 from spreadgym.agents.chart.spec import Cell, ChartSpec, cell_seed
 from spreadgym.agents.evaluation import WORST_CV_PERCENT
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import scene_with
+from spreadgym.spread.batch import run_batch
 from spreadgym.spread.metrics import RunMetrics
-from spreadgym.spread.pipeline import run_scene
 from spreadgym.spread.reference import pool_runs, reference_from
 
 SWATH_PENALTY_PERCENT = 100.0  # percentage points per unit relative swath shortfall
 LOST_MASS_PENALTY_PERCENT = 100.0  # percentage points per unit share of mass not in the trays
 CMA_SEED_RANGE = 100_000  # cma seeds its generator with seed * 1000 + restart: keep it below 2**32
+WARM_SIGMA = 0.5 * CMA_SIGMA0  # CMA-ES step size when started at a neighbour's or a policy's settings
+TIE_STANDARD_ERRORS = 2.0  # leaders within this many standard errors of the best count as ties
 
 
 def objective(metrics: RunMetrics, width_m: float) -> tuple[float, float, Optional[float]]:
@@ -55,64 +71,157 @@ def objective(metrics: RunMetrics, width_m: float) -> tuple[float, float, Option
     return cost, cv, metrics.cv_standard_error_percent
 
 
-def run_cell(spec: ChartSpec, cell: Cell) -> dict:
-    """Search and verify one cell; returns {"row": the chart row, "detail": the rest}."""
-    started = time.perf_counter()
-    library = load_library()
-    scene = spec.cell_scene(cell)
-    space = spec.space(scene)
-    evaluations_seq, cma_seq, verify_seq = cell_seed(spec.seed, cell).spawn(3)
-    seeds = evaluations_seq.generate_state(spec.budget)
-    runs: list[tuple[float, float, Optional[float]]] = []
+class Scorer:
+    """Scores unit settings on the cell's objective; counts the simulations."""
 
-    def simulate(unit: np.ndarray) -> tuple[float, float, Optional[float]]:
-        overrides = space.overrides(unit) | {"sim.seed": int(seeds[len(runs)])}
-        metrics = run_scene(scene_with(scene, overrides), model=spec.search_model, library=library, ci=False).metrics
-        runs.append(objective(metrics, cell.width_m))
-        return runs[-1]
+    def __init__(self, spec: ChartSpec, cell: Cell, seq: np.random.SeedSequence):
+        self.spec, self.cell = spec, cell
+        self.scene = spec.cell_scene(cell)
+        self.space = spec.space(self.scene)
+        self.quantile = spec.variability["quantile"]
+        self.rounds_seq, self.fresh_seq = var.child(seq, 1), var.child(seq, 2)
+        self.search_draws = self._draws(var.child(seq, 0))
+        self.simulations = 0
+
+    def _draws(self, seq: np.random.SeedSequence) -> list:
+        return var.draws(self.spec.variability, self.spec.variability["draws"], seq)
+
+    def round_draws(self, r: int) -> list:
+        """The draws of re-scoring round `r` (fresh, common to every leader)."""
+        return self._draws(var.child(self.rounds_seq, r))
+
+    def fresh_seed(self, k: int) -> int:
+        """The granule seed of the `k`-th nominal evaluation."""
+        return int(var.child(self.fresh_seq, k).generate_state(1)[0])
+
+    def score(self, unit: np.ndarray, cell_draws: Optional[list] = None, seed: Optional[int] = None) -> tuple:
+        """(cost, CV %): robust, the quantile over `cell_draws` in one batch; nominal, one run at `seed`."""
+        spec, library = self.spec, load_library()
+        settings = self.space.overrides(unit)
+        if spec.objective == "nominal":
+            scenes = [scene_with(self.scene, settings | {"sim.seed": seed})]
+        else:
+            library = var.draw_library(library, self.cell.fertilizer, cell_draws)
+            scenes = [scene_with(self.scene, var.perturbed(self.scene, settings, d, library)) for d in cell_draws]
+        found = [objective(r.metrics, self.cell.width_m)
+                 for r in run_batch(scenes, model=spec.search_model, library=library, ci=False)]
+        self.simulations += len(scenes)
+        costs, cvs = [f[0] for f in found], [f[1] for f in found]
+        return var.quantile(costs, self.quantile), var.quantile(cvs, self.quantile)
+
+
+def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np.ndarray], cma_seed: int) -> dict:
+    """CMA-ES from `x0`, then the leaders (and `neighbour`) re-scored in rounds; the pick by the tie rule."""
+    spec = scorer.spec
+    count = iter(range(spec.budget))
+    nominal = spec.objective == "nominal"
+
+    search_cvs: list[float] = []
+
+    def evaluate(unit):
+        k = next(count)
+        cost, cv = scorer.score(unit, *((None, scorer.fresh_seed(k)) if nominal else (scorer.search_draws, None)))
+        search_cvs.append(cv)
+        return -cost
 
     search_budget, _ = split_budget(spec.budget)
-    result = cmaes_search(lambda u: -simulate(u)[0], space.size, search_budget,
-                          seed=int(cma_seq.generate_state(1)[0]) % CMA_SEED_RANGE, x0=space.scene_unit(scene))
+    result = cmaes_search(evaluate, scorer.space.size, search_budget, seed=cma_seed, sigma0=sigma0, x0=x0)
     rescore_budget = spec.budget - result.evaluations
-    kept = [Leader(x) for x in leaders(result, max(1, min(LEADERS, rescore_budget // 2)))]
-    if rescore_budget >= 2 * len(kept):
-        for k in range(rescore_budget):
-            leader = kept[k % len(kept)]
-            cost, cv, se = simulate(leader.x)
-            leader.rewards.append(-cost)
-            leader.cvs.append(cv)
-            leader.cv_ses.append(se)
-        best = max(kept, key=lambda leader: leader.mean_reward)
-    else:  # too small a budget to re-score: the belief is the search's own best evaluation
+    kept = leaders(result, max(1, min(LEADERS, rescore_budget // 2)))
+    if neighbour is not None and not any(np.array_equal(neighbour, x) for x in kept):
+        kept.append(neighbour)
+    rounds = rescore_budget // len(kept)
+    if rounds < 2:  # too small a budget to re-score: the belief is the search's own best evaluation
         i = int(np.argmax(result.history))
-        best = Leader(result.best_x, [result.best_reward], [runs[i][1]], [runs[i][2]])
-    cv_search, cv_search_se = best.cv_belief()
+        return {"x": result.best_x, "cv": search_cvs[i], "cv_se": None, "rounds": 0, "ties": 1,
+                "evaluations": result.evaluations}
+    scores = np.zeros((len(kept), rounds, 2))
+    for r in range(rounds):
+        cell_draws = None if nominal else scorer.round_draws(r)
+        seed = scorer.fresh_seed(result.evaluations + r) if nominal else None
+        for i, x in enumerate(kept):
+            scores[i, r] = scorer.score(x, cell_draws, seed)
+    means = scores[:, :, 0].mean(axis=1)
+    best = int(np.argmin(means))
+    best_se = float(scores[best, :, 0].std(ddof=1) / math.sqrt(rounds))
+    ties = [i for i in range(len(kept)) if means[i] <= means[best] + TIE_STANDARD_ERRORS * best_se]
+    pick = best if neighbour is None else min(ties, key=lambda i: (float(np.linalg.norm(kept[i] - neighbour)),
+                                                                   means[i]))
+    cvs = scores[pick, :, 1]
+    return {"x": kept[pick], "cv": float(cvs.mean()), "cv_se": float(cvs.std(ddof=1) / math.sqrt(rounds)),
+            "rounds": rounds, "ties": len(ties), "evaluations": result.evaluations + rounds * len(kept)}
 
-    verify_scene = scene_with(scene, space.overrides(best.x) | {"sim.seed": int(verify_seq.generate_state(1)[0])})
+
+def verify_p90(spec: ChartSpec, cell: Cell, scene, settings: dict, seq: np.random.SeedSequence) -> dict:
+    """The winner on `verify_draws` fresh draws, one full-model run each: the quantile and its bootstrap SE."""
+    draws_seq, bootstrap_seq = var.child(seq, 0), var.child(seq, 1)
+    cell_draws = var.draws(spec.variability, spec.variability["verify_draws"], draws_seq)
+    library = var.draw_library(load_library(), cell.fertilizer, cell_draws)
+    scenes = [scene_with(scene, var.perturbed(scene, settings, d, library)) for d in cell_draws]
+    results = run_batch(scenes, model=spec.verify_model, library=library, ci=False)
+    cvs = [objective(r.metrics, cell.width_m)[1] for r in results]
+    q = spec.variability["quantile"]
+    return {"cv_percent": var.quantile(cvs, q), "standard_error_percent": var.bootstrap_se(cvs, q, bootstrap_seq),
+            "draws": len(cvs), "runs_per_draw": 1, "granules": scene.sim.granules, "model": spec.verify_model,
+            "cv_draws_percent": cvs}
+
+
+def run_cell(spec: ChartSpec, cell: Cell, previous: Optional[dict] = None) -> dict:
+    """Search and verify one cell; `previous` is the record of the narrower neighbour
+    (`spec.previous(cell)`, None for the first width). Returns {"row": the chart row, "detail": the rest}."""
+    started = time.perf_counter()
+    library = load_library()
+    scorer_seq, cma_seq, verify_seq, p90_seq, policy_seq = cell_seed(spec.seed, cell).spawn(5)
+    scorer = Scorer(spec, cell, scorer_seq)
+    scene, space = scorer.scene, scorer.space
+    neighbour = None if previous is None else np.asarray(previous["detail"]["unit_settings"], dtype=float)
+    proposal = None
+    if spec.method != "cmaes":
+        from spreadgym.agents.chart.policy import propose
+
+        proposal = propose(spec, cell, policy_seq)
+    if spec.method == "policy":
+        found = {"x": proposal, "cv": None, "cv_se": None, "rounds": 0, "ties": 1, "evaluations": 0}
+    else:
+        x0 = proposal if proposal is not None else (neighbour if neighbour is not None else space.scene_unit(scene))
+        warm = proposal is not None or neighbour is not None
+        found = search(scorer, x0, WARM_SIGMA if warm else CMA_SIGMA0, neighbour,
+                       int(cma_seq.generate_state(1)[0]) % CMA_SEED_RANGE)
+    best_x = np.asarray(found["x"], dtype=float)
+    settings = space.overrides(best_x)
+    verify_scene = scene_with(scene, settings | {"sim.seed": int(verify_seq.generate_state(1)[0])})
     pooled = pool_runs(verify_scene, spec.verify_runs, model=spec.verify_model, library=library)
     reference = reference_from(verify_scene, pooled)
     cv, cv_se = reference.at_target.cv_percent, reference.at_target.standard_error_percent
+    p90 = verify_p90(spec, cell, scene, settings, p90_seq)
+    verified, verified_se = (cv, cv_se) if spec.objective == "nominal" else (p90["cv_percent"],
+                                                                             p90["standard_error_percent"])
     agree = None
-    if cv is not None and cv_se is not None and cv_search_se is not None:
-        agree = abs(cv - cv_search) <= 2.0 * math.hypot(cv_se, cv_search_se)
+    if verified is not None and verified_se is not None and found["cv_se"] is not None:
+        agree = abs(verified - found["cv"]) <= 2.0 * math.hypot(verified_se, found["cv_se"])
     row = {"fertilizer": cell.fertilizer, "width_m": cell.width_m, "driving": spec.driving,
-           **space.values(best.x),
+           **space.values(best_x),
            "cv_percent": cv, "cv_standard_error_percent": cv_se,
-           "effective_swath_m": reference.effective_swath_m, "cv_search_percent": cv_search,
-           "simulations": len(runs) + spec.verify_runs, "wall_s": time.perf_counter() - started}
+           "cv_p90_percent": p90["cv_percent"], "cv_p90_standard_error_percent": p90["standard_error_percent"],
+           "effective_swath_m": reference.effective_swath_m, "cv_search_percent": found["cv"],
+           "simulations": scorer.simulations + spec.verify_runs + p90["draws"],
+           "wall_s": time.perf_counter() - started}
     detail = {
         "key": cell.key,
-        "unit_settings": [float(v) for v in best.x],
-        "cv_search_standard_error_percent": cv_search_se,
-        "search_evaluations": result.evaluations,
-        "rescores": len(best.rewards) if rescore_budget >= 2 * len(kept) else 0,
+        "unit_settings": [float(v) for v in best_x],
+        "objective": spec.objective,
+        "method": spec.method,
+        "cv_search_standard_error_percent": found["cv_se"],
+        "search_evaluations": found["evaluations"],
+        "rescores": found["rounds"],
+        "ties": found["ties"],
         "search_agrees_within_2se": agree,
         "meets_threshold": cv is not None and cv <= scene.pattern.cv_threshold_percent,
         "verification": {"model": pooled.model, "granules": pooled.granules, "replicates": pooled.replicates,
                          "cv_raw_percent": reference.at_target.raw_percent,
                          "effective_swath_interval_m": list(reference.effective_swath_interval_m),
                          "wall_s": pooled.wall_s},
+        "verification_p90": p90,
         "trays": {"center_m": reference.trays.center_m.tolist(), "mass_kg": reference.trays.mass_kg.tolist()},
         "cv_curve": {"bout_width_m": reference.widths_m.tolist(),
                      "cv_percent": [None if not np.isfinite(v) else float(v) for v in reference.cv_percent]},

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import math
 import zlib
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Optional
 
 import numpy as np
 
+from spreadgym.agents.chart.variability import check_variability
 from spreadgym.config.base import brief
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Scene, bout_trays, check_pooled_work, load_scene, scene_from_dict, scene_with
@@ -32,6 +33,8 @@ MAX_PROBES = 32
 MAX_BUDGET = 100_000  # simulations per cell: days of work already; beyond it only memory runs out
 MAX_WIDTHS = 2000  # every multiple of the finest tray (0.05 m) up to 100 m
 MAX_WIDTH_M = 100.0
+OBJECTIVES = ("robust", "nominal")  # robust: the search minimises the variability model's quantile
+METHODS = ("cmaes", "policy", "policy+search")
 
 
 @dataclass(frozen=True)
@@ -62,10 +65,30 @@ class ChartSpec:
     verify_model: str = VERIFY_MODEL
     verify_runs: int = VERIFY_RUNS
     settings: Optional[dict] = None  # keyword arguments of SettingsSpace beyond the scene (ranges)
+    objective: str = "robust"
+    method: str = "cmaes"
+    policy: Optional[str] = None  # the policy file (method policy, policy+search)
+    policy_sha256: Optional[str] = None  # its content, so a changed policy is noticed on resume
+    variability: dict = field(default_factory=check_variability)  # the checked variability model
 
     @property
     def cells(self) -> list[Cell]:
         return [Cell(f, w) for f in self.fertilizers for w in self.widths_m]
+
+    def previous(self, cell: Cell) -> Optional[Cell]:
+        """The cell one width narrower in the same row (its settings start this cell's search), or None."""
+        i = self.widths_m.index(cell.width_m)
+        return Cell(cell.fertilizer, self.widths_m[i - 1]) if i > 0 else None
+
+    @property
+    def draws(self) -> int:
+        """Simulations per candidate: the variability model's draws (robust) or one (nominal)."""
+        return self.variability["draws"] if self.objective == "robust" else 1
+
+    @property
+    def max_simulations(self) -> int:
+        """Most simulations a cell may make: the search's and the verification's."""
+        return self.budget * self.draws + self.verify_runs + self.variability["verify_draws"]
 
     def manifest(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -170,11 +193,22 @@ def resolve_fertilizers(text_or_names, scene: Scene, library: MaterialLibrary) -
 def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, budget: int = 200,
               granules: Optional[int] = None, seed: int = 0, search_model: str = SEARCH_MODEL,
               verify_model: str = VERIFY_MODEL, verify_runs: int = VERIFY_RUNS, settings: Optional[dict] = None,
+              objective: str = "robust", method: str = "cmaes", policy: Optional[str] = None, variability=None,
               library: Optional[MaterialLibrary] = None) -> tuple[ChartSpec, list[str]]:
     """A checked ChartSpec and notes for people. Every problem is a SpreadgymError naming
     the flag or key: unknown fertilizer or model, width off the tray grid or beyond what
-    the scene can throw, budget or granules below 1, settings ranges out of bounds."""
+    the scene can throw, budget or granules below 1, settings ranges out of bounds, an
+    unknown objective or method, a policy missing or given without a policy method, a
+    variability entry out of range."""
     library = library or load_library()
+    if objective not in OBJECTIVES:
+        raise SpreadgymError(f"--objective: {brief(objective)}; allowed: {', '.join(OBJECTIVES)}")
+    if method not in METHODS:
+        raise SpreadgymError(f"--method: {brief(method)}; allowed: {', '.join(METHODS)}")
+    if (policy is None) == method.startswith("policy"):
+        raise SpreadgymError(f"--policy: {'needed by' if policy is None else 'not used by'} --method {method}"
+                             + (" (a policy saved by spreadgym train)" if policy is None else ""))
+    variability = check_variability(variability)
     base = load_scene(scene)
     if not 1 <= int(budget) <= MAX_BUDGET:
         raise SpreadgymError(f"--budget: {budget} is out of range; allowed [1, {MAX_BUDGET}] simulations")
@@ -196,8 +230,14 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
     if not widths_m:
         raise SpreadgymError("--widths: give at least one width")
     check_widths(widths_m, base.pattern.tray_width_m)
+    digest = None
+    if policy is not None:
+        from spreadgym.agents.chart.policy import check_policy
+
+        policy, digest = check_policy(policy, base)
     spec = ChartSpec(base.model_dump(mode="json"), names, tuple(sorted(widths_m)), driving, int(budget), granules,
-                     int(seed), search_model, verify_model, int(verify_runs), settings)
+                     int(seed), search_model, verify_model, int(verify_runs), settings, objective, method, policy,
+                     digest, variability)
     try:
         scene = spec.cell_scene(spec.cells[0])
         check_pooled_work(scene, spec.verify_runs, "--granules")

@@ -29,11 +29,13 @@ from spreadgym.report import print_json
 
 MANIFEST = "manifest.json"
 CELLS = "cells"
-CHART_FILES = ("chart.csv", "chart.json", "chart.md", "chart.png")
+CHART_FILES = ("chart.csv", "chart.json", "chart.md", "chart.png", "chart.html")
 HEAD = ["fertilizer", "width_m", "driving"]  # a row: the cell, its settings (units in their names), the results
-TAIL = ["cv_percent", "cv_standard_error_percent", "effective_swath_m", "cv_search_percent", "simulations", "wall_s"]
-DETAIL = {"key", "unit_settings", "cv_search_standard_error_percent", "search_evaluations", "rescores",
-          "search_agrees_within_2se", "meets_threshold", "verification", "trays", "cv_curve"}
+TAIL = ["cv_percent", "cv_standard_error_percent", "cv_p90_percent", "cv_p90_standard_error_percent",
+        "effective_swath_m", "cv_search_percent", "simulations", "wall_s"]
+DETAIL = {"key", "unit_settings", "objective", "method", "cv_search_standard_error_percent", "search_evaluations",
+          "rescores", "ties", "search_agrees_within_2se", "meets_threshold", "verification", "verification_p90",
+          "trays", "cv_curve"}
 PNG_START, PNG_END = b"\x89PNG\r\n\x1a\n", b"IEND\xaeB`\x82"
 
 
@@ -204,13 +206,15 @@ def record_problem(spec: ChartSpec, cell: Cell, record: Any) -> Optional[str]:
         return "its unit settings are not in the box"
     if space.values(unit) != {name: row[name] for name in space.names}:
         return "its settings do not match its unit settings"
-    optional = ("cv_percent", "cv_standard_error_percent", "cv_search_percent")
+    optional = ("cv_percent", "cv_standard_error_percent", "cv_p90_standard_error_percent", "cv_search_percent")
     if not all(row[k] is None or _real(row[k], 0.0) for k in optional):
         return "a CV is not a finite number >= 0"
-    if not all(_real(row[k], 0.0) for k in ("effective_swath_m", "wall_s")):
+    if not all(_real(row[k], 0.0) for k in ("cv_p90_percent", "effective_swath_m", "wall_s")):
         return "a result is not a finite number >= 0"
-    if not (isinstance(row["simulations"], int) and spec.verify_runs < row["simulations"]
-            <= spec.budget + spec.verify_runs):
+    if (detail["objective"], detail["method"]) != (spec.objective, spec.method):
+        return "its objective or method is not the spec's"
+    verified = spec.verify_runs + spec.variability["verify_draws"]
+    if not (isinstance(row["simulations"], int) and verified <= row["simulations"] <= spec.max_simulations):
         return "its simulation count is not the spec's"
     trays, curve = detail["trays"], detail["cv_curve"]
     if not (isinstance(trays, dict) and _reals(trays.get("center_m")) and _reals(trays.get("mass_kg"), 0.0)
@@ -225,4 +229,9 @@ def record_problem(spec: ChartSpec, cell: Cell, record: Any) -> Optional[str]:
     if not (isinstance(verification, dict) and isinstance(verification.get("model"), str)
             and isinstance(verification.get("granules"), int)):
         return "its verification is not recorded"
+    p90 = detail["verification_p90"]
+    if not (isinstance(p90, dict) and _reals(p90.get("cv_draws_percent"), 0.0)
+            and len(p90["cv_draws_percent"]) == spec.variability["verify_draws"]
+            and p90.get("cv_percent") == row["cv_p90_percent"]):
+        return "its p90 verification is not recorded"
     return None

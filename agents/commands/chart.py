@@ -15,7 +15,7 @@ DRIVING = ("racetrack", "back-and-forth")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
-    from spreadgym.agents.chart.spec import MAX_BUDGET
+    from spreadgym.agents.chart.spec import MAX_BUDGET, METHODS, OBJECTIVES
 
     parser.add_argument("--scene", required=True, metavar="S", help="shipped scene name or a YAML path")
     parser.add_argument("--fertilizers", required=True, metavar="F1,F2|all",
@@ -24,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="working widths in metres, multiples of the scene's tray width")
     parser.add_argument("--driving", choices=DRIVING, help="driving pattern (default: the scene's)")
     parser.add_argument("--budget", type=arguments.integer(1, MAX_BUDGET), default=DEFAULT_BUDGET, metavar="N",
-                        help=f"fast-model simulations per cell for the search (default {DEFAULT_BUDGET})")
+                        help=f"candidates per cell for the search, each one fast-model simulation per batch of "
+                             f"the variability model (robust) or one (nominal) (default {DEFAULT_BUDGET})")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
                         help="granules per simulation, search and verification runs alike (default: the scene's)")
     parser.add_argument("--seed", type=arguments.SEED, default=0,
@@ -37,6 +38,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=Path("out/chart"), metavar="DIR",
                         help="chart folder, created when the chart starts; rerunning the same command resumes it "
                              "(default out/chart)")
+    parser.add_argument("--method", choices=METHODS, default="cmaes",
+                        help="cmaes: search every cell; policy: a trained policy's proposal; policy+search: a "
+                             "search started at it (default cmaes)")
+    parser.add_argument("--objective", choices=OBJECTIVES, default="robust",
+                        help="robust: the search minimises the CV 90 %% of batches stay under (the variability "
+                             "model); nominal: the CV of the nominal scene (default robust)")
+    parser.add_argument("--policy", metavar="PATH",
+                        help="a SpinnerDesign policy saved by spreadgym train (DIR or DIR/model.zip), for "
+                             "--method policy and policy+search")
+    parser.add_argument("--variability", metavar="FILE",
+                        help="a YAML file with a 'variability:' section over the defaults "
+                             "(configs/chart_variability.yaml)")
     parser.add_argument("--json", action="store_true", help="print chart.json on stdout")
 
 
@@ -46,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     from spreadgym.report import print_json
 
     result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving, budget=args.budget,
-                   granules=args.granules, seed=args.seed, workers=args.workers, address=args.address)
+                   granules=args.granules, seed=args.seed, workers=args.workers, address=args.address,
+                   method=args.method, objective=args.objective, policy=args.policy, variability=args.variability)
     for key, problem in result.replaced.items():
         print(f"cells/{key}.json was not its cell's record ({problem}): computed again", file=sys.stderr)
     if args.json:

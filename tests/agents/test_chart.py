@@ -21,9 +21,11 @@ FERTILIZER = "compound-10-16-10"
 # Small and fast: the closed form searches (drop 0 makes it exact for this scene), the
 # full model verifies with 2 pooled runs.
 KEYS = ["compound-10-16-10_003000mm", "compound-10-16-10_004000mm"]
-SMALL = dict(budget=6, granules=64, search_model="analytic", verify_runs=2)
+DRAWS = {"draws": 4, "verify_draws": 4}  # perturbed batches per candidate and in the p90 verification
+SMALL = dict(budget=6, granules=64, search_model="analytic", verify_runs=2, variability=DRAWS)
 COLUMNS = ["fertilizer", "width_m", "driving", "rpm", "pitch_deg", "cv_percent", "cv_standard_error_percent",
-           "effective_swath_m", "cv_search_percent", "simulations", "wall_s"]
+           "cv_p90_percent", "cv_p90_standard_error_percent", "effective_swath_m", "cv_search_percent", "simulations",
+           "wall_s"]
 
 
 def small_spec(**changes):
@@ -43,7 +45,7 @@ def chart(tmp_path_factory):
 def test_small_chart_writes_every_output(chart):
     out, result = chart
     names = {p.name for p in result.files}
-    assert names == {"chart.csv", "chart.json", "chart.md", "chart.png"}
+    assert names == {"chart.csv", "chart.json", "chart.md", "chart.png", "chart.html"}
     with open(out / "chart.csv", encoding="utf-8") as handle:
         reader = csv.DictReader(handle)
         assert reader.fieldnames == COLUMNS
@@ -54,8 +56,13 @@ def test_small_chart_writes_every_output(chart):
     assert set(payload["widest_width_m"]) == {FERTILIZER}
     for row in payload["rows"]:
         assert 200.0 <= row["rpm"] <= 1100.0 and -30.0 <= row["pitch_deg"] <= 30.0
-        assert row["simulations"] == SMALL["budget"] + SMALL["verify_runs"]
-        assert row["cv_standard_error_percent"] > 0
+        assert row["cv_standard_error_percent"] > 0 and row["cv_p90_standard_error_percent"] > 0
+    first, second = payload["cells"]
+    # 4 candidates searched and, at 3 m, 2 rounds of re-scores of 1 leader; at 4 m the leader and the
+    # 3 m settings leave one round each, too few to re-score (each candidate 4 batches); then the
+    # 2 nominal and 4 perturbed verification runs
+    assert [r["simulations"] for r in payload["rows"]] == [(4 + 2) * 4 + 2 + 4, 4 * 4 + 2 + 4]
+    assert (first["rescores"], second["rescores"]) == (2, 0)
     for key in ("compound-10-16-10_003000mm", "compound-10-16-10_004000mm"):
         assert (out / "cells" / f"{key}.json").is_file() and (out / "cells" / f"{key}.png").stat().st_size > 0
     md = (out / "chart.md").read_text(encoding="utf-8")

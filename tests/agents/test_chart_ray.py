@@ -12,7 +12,7 @@ import ray
 from spreadgym.agents.chart import make_spec, run_chart
 from spreadgym.agents.chart.search import run_cell
 
-SMALL = dict(budget=6, granules=64, search_model="analytic", verify_runs=2)
+SMALL = dict(budget=6, granules=64, search_model="analytic", verify_runs=2, variability={"draws": 4, "verify_draws": 4})
 
 
 def without_wall(rows):
@@ -25,7 +25,7 @@ def test_cli_end_to_end_on_an_embedded_two_cpu_ray(tmp_path):
     out = tmp_path / "chart"
     argv = [sys.executable, "-m", "spreadgym.cli.main", "chart", "--scene", "paper", "--fertilizers",
             "compound-10-16-10,pellet", "--widths", "3,4", "--budget", "1", "--granules", "64", "--workers", "2",
-            "--out", str(out), "--json"]
+            "--objective", "nominal", "--out", str(out), "--json"]
     env = {**os.environ, "RAY_ADDRESS": "127.0.0.1:1"}
     proc = subprocess.run(argv, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 0, proc.stderr
@@ -34,11 +34,13 @@ def test_cli_end_to_end_on_an_embedded_two_cpu_ray(tmp_path):
         ("compound-10-16-10", 3.0), ("compound-10-16-10", 4.0), ("pellet", 3.0), ("pellet", 4.0)]
     assert all(c["verification"]["model"] == "pymunk" for c in payload["cells"])
     assert all(r["cv_percent"] is not None for r in payload["rows"])
-    assert {p.name for p in out.iterdir()} >= {"chart.csv", "chart.json", "chart.md", "chart.png", "manifest.json"}
+    assert {p.name for p in out.iterdir()} >= {"chart.csv", "chart.json", "chart.md", "chart.png", "chart.html",
+                                               "manifest.json"}
     assert json.loads((out / "chart.json").read_text(encoding="utf-8")) == payload
-    # The same seed gives the same cell in this process, one cell at a time, as on two Ray workers.
-    spec = make_spec("paper", "compound-10-16-10,pellet", "3,4", budget=1, granules=64)[0]
-    again = run_cell(spec, spec.cells[3])["row"]
+    # The same seed gives the same cell in this process, one cell at a time, as on two Ray workers
+    # (the 4 m cell starts from the 3 m cell's settings).
+    spec = make_spec("paper", "compound-10-16-10,pellet", "3,4", budget=1, granules=64, objective="nominal")[0]
+    again = run_cell(spec, spec.cells[3], {"detail": payload["cells"][2]})["row"]
     assert without_wall([again]) == without_wall(payload["rows"][3:])
 
 
