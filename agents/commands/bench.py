@@ -15,7 +15,7 @@ from spreadgym.cli import arguments
 from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
-            "stability", "magnus", "chart-scale", "vector-env", "startup", "precision")
+            "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "batch")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
         "vector-env": lambda: vector_env_steps_per_second(repeats=args.repeats),
         "startup": lambda: startup.startup_rows(repeats=args.repeats),
         "precision": lambda: precision_rows(estimate_bench, args.out, say),
+        "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
     }
     plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy,
              "chart-scale": scale.plot_chart_scale}
@@ -194,3 +195,55 @@ def vector_env_steps_per_second(batch: int = 64, vector_steps: int = 2, repeats:
     return [{"env": name, "batch": size, "steps_per_s": statistics.median(rates), "steps_per_s_low": min(rates),
              "steps_per_s_high": max(rates), "ratio_to_single": statistics.median(rates) / statistics.median(single)}
             for name, size, rates in (("SpinnerDesignVectorEnv", batch, vector), ("gym.make, one env", 1, single))]
+
+
+def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
+    """Designs per second evaluated one by one and as batches (spreadgym.spread.batch), at
+    one thread and at every thread spreadgym may use: SpinnerDesign's single env against
+    its native vector env at `batch` sub-envs (default config, paper scene), and
+    `run_scene` calls against one `run_batch` on paper, field and twin-field scenes of
+    mixed settings. Each figure is the median of `repeats` blocks of `batch` designs, with
+    the blocks' range; the series' blocks are interleaved so that a shared machine's load
+    falls on all of them alike. Ratios are to the one-by-one figure at one thread."""
+    import statistics
+    import time
+
+    import gymnasium as gym
+
+    from spreadgym import threads
+    from spreadgym.studies.benchmarks import batch_series
+
+    everything = threads.thread_count()
+    venv = gym.make_vec("spreadgym/SpinnerDesign-v0", num_envs=batch, autoreset_mode="same_step")
+    venv.reset(seed=0)
+    venv.action_space.seed(0)
+    env = gym.make("spreadgym:SpinnerDesign-v0")
+    env.reset(seed=0)
+    env.action_space.seed(0)
+
+    def single_block():
+        for _ in range(batch):
+            env.step(env.action_space.sample())
+            env.reset()
+
+    series = {("SpinnerDesign, one env", 1): single_block,
+              (f"SpinnerDesignVectorEnv ({batch})", batch): lambda: venv.step(venv.action_space.sample())}
+    rates: dict = {(name, size, n): [] for name, size in series for n in sorted({1, everything})}
+    for block in range(repeats + 1):  # block 0 warms up (compiles or loads the kernels)
+        for (name, size, n), found in rates.items():
+            threads.set_threads(n)
+            start = time.perf_counter()
+            series[name, size]()
+            if block:
+                found.append(batch / (time.perf_counter() - start))
+    threads.set_threads(None)
+    venv.close()
+    env.close()
+    rows = [{"what": name, "batch": size, "threads": n, "designs_per_s": statistics.median(r),
+             "designs_per_s_low": min(r), "designs_per_s_high": max(r)} for (name, size, n), r in rates.items()]
+    core = batch_series(batch, repeats)
+    for group in (rows, core):
+        base = group[0]["designs_per_s"]  # one by one at one thread
+        for row in group:
+            row["ratio_to_one_by_one_at_1_thread"] = row["designs_per_s"] / base
+    return rows + core

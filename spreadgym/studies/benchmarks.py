@@ -133,3 +133,38 @@ def flight_benchmark(counts=(2000, 20000), repeats: int = 5) -> list[dict]:
         wall, _ = median_time(fly, repeats)
         rows.append({"granules": n, "wall_s": wall, "granules_per_s": n / wall})
     return rows
+
+
+def batch_series(batch: int = 64, repeats: int = 5) -> list[dict]:
+    """Designs per second of `batch` scenes (paper, field and twin-field in turn, rpm and
+    seed varied) run by `run_scene` one by one and by one `run_batch`, at one thread and
+    at all of spreadgym.threads' count: median of `repeats` interleaved blocks, and their
+    range (see agents/commands/bench.py, section batch). Checks the batch's bits."""
+    from spreadgym import threads
+    from spreadgym.config.scene import scene_with
+    from spreadgym.spread.batch import run_batch
+    from spreadgym.spread.pipeline import run_scene
+
+    library = load_library()
+    bases = [load_scene(name) for name in ("paper", "field", "twin-field")]
+    scenes = [scene_with(bases[i % 3], {"sim.seed": i, "spinner.rpm": 450.0 + 5.0 * i}) for i in range(batch)]
+    ways = {"run_scene, one by one": lambda: [run_scene(s, library=library, ci=False) for s in scenes],
+            "run_batch": lambda: run_batch(scenes, library=library, ci=False)}
+    everything = threads.thread_count()
+    rates: dict = {(name, n): [] for name in ways for n in sorted({1, everything})}
+    found = {}
+    for block in range(repeats + 1):  # block 0 warms up
+        for (name, n), kept in rates.items():
+            threads.set_threads(n)
+            start = time.perf_counter()
+            found[name] = ways[name]()
+            if block:
+                kept.append(batch / (time.perf_counter() - start))
+    threads.set_threads(None)
+    same = all(np.array_equal(a.replicate_masses_kg, b.replicate_masses_kg)
+               for a, b in zip(found["run_scene, one by one"], found["run_batch"]))
+    if not same:
+        raise AssertionError("run_batch differs from run_scene")
+    return [{"what": f"{name} (paper, field, twin-field)", "batch": 1 if "one by one" in name else batch,
+             "threads": n, "designs_per_s": statistics.median(r), "designs_per_s_low": min(r),
+             "designs_per_s_high": max(r)} for (name, n), r in rates.items()]
