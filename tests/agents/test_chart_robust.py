@@ -166,3 +166,18 @@ def test_a_variability_file_is_read_and_checked(tmp_path, capsys):
     code = main(["chart", "--scene", "paper", "--fertilizers", FERTILIZER, "--widths", "3", "--variability",
                  str(bad), "--out", str(tmp_path / "o")])
     assert code == 2 and "variability.humidity: unknown key" in capsys.readouterr().err
+
+
+def test_quality_counts_reversals_and_the_robust_targets():
+    from spreadgym.agents.chart.quality import chart_quality, reversals
+
+    assert reversals([1.0, 3.0, 2.0, 4.0]) == [(1, 1.0), (2, 1.0)] and reversals([1.0, 2.0, 2.0, 5.0]) == []
+    rows = [{"fertilizer": "a", "width_m": w, "rpm": rpm, "pitch_deg": pitch, "cv_percent": cv, "cv_p90_percent": p90}
+            for w, rpm, pitch, cv, p90 in [(3, 500, 10, 2.0, 2.5), (4, 600, 14, 4.0, 7.0), (5, 580, 9, 9.0, 16.0),
+                                           (6, 700, 12, 20.0, 25.0)]]
+    quality = chart_quality({"rows": rows})
+    assert quality["p90_within_ratio_share"] == 0.5  # 4 m: 7 > 1.5 x 4; 5 m: 16 > 1.5 x 9
+    assert quality["p90_over_cap"] == [("a", 5)]
+    # rpm turns by 20 of 600 and of 580 (3.3 and 3.4 %); pitch by 4 deg at 4 m and 3 deg (not over) at 5 m
+    assert quality["reversals"]["a"] == {"rpm": [], "pitch": [(4, 4.0)]}
+    assert (quality["rpm_reversals"], quality["pitch_reversals"]) == (0, 1)
