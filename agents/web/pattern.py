@@ -165,7 +165,8 @@ def _xy(points) -> list:
 
 
 def plot_data(scene: Scene, precise) -> dict:
-    """The pictures' data: plan view (disc, vanes, plates, feed, paths, rays), landings,
+    """The pictures' data: plan view (disc, vanes, plates, feed, paths, rays; the first disc's
+    frame, as `simulate --plot` draws it), landings,
     single-pass and overlapped tray pattern, CV against width."""
     from spreadgym.physics.geometry import vane_segments
     from spreadgym.spread import pattern
@@ -182,7 +183,7 @@ def plot_data(scene: Scene, precise) -> dict:
     inner, outer = vane_segments(scene)
     feed = scene.feed
     plan = {
-        "disc_radius_m": scene.spinner.radius_m, "centres_m": [list(c) for c in scene.disc_centres_m],
+        "disc_radius_m": scene.spinner.radius_m, "twin": scene.twin is not None,  # the first disc, as simulate --plot
         "vanes": [_xy([a, b]) for a, b in zip(inner, outer)],
         "feed_m": [feed.radius_m * math.cos(feed.angle_rad), feed.radius_m * math.sin(feed.angle_rad)],
         "tracks": [_xy(path) for path in dep.tracks[:TRACKS]],

@@ -149,3 +149,22 @@ def test_the_chart_page_shows_a_chart(server, driver):
     shots = _shots()
     if shots:
         driver.save_screenshot(str(shots / "charts.png"))
+
+
+def test_an_uploaded_scene_drives_the_page(server, driver, tmp_path):
+    from selenium.webdriver.common.by import By
+
+    text = (ROOT / "configs" / "scenes" / "paper.yaml").read_text().replace("rpm: 500", "rpm: 700")
+    assert "rpm: 700" in text
+    upload = tmp_path / "mine.yaml"
+    upload.write_text(text)
+    driver.get(server + "/")
+    _wait(driver, "return document.body.dataset.rev")
+    rev = driver.execute_script("return document.body.dataset.rev")
+    driver.find_element(By.ID, "upload").send_keys(str(upload))
+    _wait(driver, f"return document.body.dataset.rev !== '{rev}'")
+    assert driver.find_element(By.ID, "c0").get_attribute("value") == "700"
+    broken = tmp_path / "broken.yaml"  # another name: the same file chosen again fires no change
+    broken.write_text("spinner: [unclosed")
+    driver.find_element(By.ID, "upload").send_keys(str(broken))
+    _wait(driver, "return document.getElementById('error').textContent.includes('uploaded scene')")

@@ -46,6 +46,9 @@ async function showChart(name) {
       "<p>Not finished yet: " + c.cell_pictures.length + " cell picture(s) so far.</p>"];
     const links = c.files.map((f) => `<a href="${fileUrl(name, f)}">${escaped(f)}</a>`).join(" · ");
     parts.push('<p class="noprint">files: ' + links + "</p>");
+    if (c.files.includes("chart.html")) {
+      parts.unshift(`<p class="noprint"><a href="${fileUrl(name, "chart.html")}">printable chart</a></p>`);
+    }
     if (c.files.includes("chart.png")) parts.push(`<img alt="chart" src="${fileUrl(name, "chart.png")}">`);
     for (const p of c.cell_pictures) parts.push(`<img alt="${escaped(p)}" src="${fileUrl(name, p)}">`);
     $("chart").innerHTML = parts.join("\n");

@@ -78,8 +78,8 @@ function joined(paths) {  // many paths as one trace, separated by gaps
 
 function drawPlan(plan) {
   const r = plan.disc_radius_m, lim = 1.06 * plan.reach_m;
-  const shapes = plan.centres_m.map(([cx, cy]) => ({ type: "circle", x0: cx - r, x1: cx + r, y0: cy - r, y1: cy + r,
-    fillcolor: "#eeeeee", line: { color: "#555" }, layer: "below" }));
+  const shapes = [{ type: "circle", x0: -r, x1: r, y0: -r, y1: r, fillcolor: "#eeeeee", line: { color: "#555" },
+    layer: "below" }];
   const traces = [
     { ...joined(plan.rays), mode: "lines", name: "flight direction", line: { color: "#9ecae1", width: 1 } },
     { ...joined(plan.tracks), mode: "lines", name: "path on the disc", line: { color: "#d62728", width: 1.2 } },
@@ -89,7 +89,7 @@ function drawPlan(plan) {
   ];
   if (plan.plates.length) traces.push({ ...joined(plan.plates), mode: "lines", name: "deflector plates",
     line: { color: "#8c564b", width: 5 } });
-  Plotly.react("plan", traces, { ...LAYOUT, title: { text: "Plan view" }, shapes,
+  Plotly.react("plan", traces, { ...LAYOUT, title: { text: plan.twin ? "Plan view (first disc)" : "Plan view" }, shapes,
     xaxis: { range: [-lim, lim], title: { text: "x, across (m)" } },
     yaxis: { range: [-lim, lim], scaleanchor: "x", title: { text: "y, forward (m)" } } }, CONFIG);
 }
