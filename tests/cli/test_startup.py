@@ -12,6 +12,8 @@ import sys
 
 import pytest
 
+from spreadgym.cli import COMMANDS
+
 HEAVY = ("gymnasium", "matplotlib", "torch", "ray", "scipy.stats", "scipy.integrate", "optuna", "stable_baselines3")
 PROBE = """
 import contextlib, io, json, sys
@@ -48,3 +50,12 @@ def test_importing_the_package_loads_no_gymnasium_yet_registers_the_envs_once_it
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert "spreadgym/SpinnerDesign-v0" in done.stdout and "spreadgym:SpinnerDesign-v0" in done.stdout
+
+
+@pytest.mark.parametrize("command", [None, *COMMANDS])
+def test_every_help_text_prints(command, capsys):
+    """argparse formats help strings with %: a bare one (say '90 %') crashes --help."""
+    from spreadgym.cli.main import main
+
+    assert main(["--help"] if command is None else [command, "--help"]) == 0
+    assert "usage: spreadgym" in capsys.readouterr().out
