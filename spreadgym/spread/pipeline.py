@@ -129,7 +129,7 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
         departure = tilted_by_cone(next(spun), np.radians(disc.scene.spinner.cone_deg))
         launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
         throws.append(twin.Throw(granules, departure, launch))
-        copies, copies_reason = rotations.copies_for(disc.scene)
+        copies, copies_reason = rotations.copies_for(disc.scene, len(parts))
         turns.append(rotations.copy_turns(granules, disc.scene, copies, scene.sim.seed, first_replicate))
     # every disc flies in its own frame; the pattern is in the machine frame
     local = twin.combined(throws)
@@ -159,8 +159,18 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
         time_s = np.full(granules.count, np.nan)
         time_s[gone] = flown.time_s
         landing = flight_model.Landing(local_landing[flying] + centre[flying], time_s[flying])
-        sample, lost_kg = rotations.copied_sample(throws, np.split(local_landing, np.cumsum(counts)[:-1]), turns,
-                                                 parts, mirror)
+        if parts[0].scene.deflectors:  # one disc among plates (rotations.copies_for)
+            plates, throw = parts[0].scene.deflectors, throws[0]
+            free = rotations.straight_paths(throw.departure, plates, granules.radius_m)
+            near = rotations.near_own_paths(throw, free, plates)
+            free_landing = local_landing.copy()
+            if near.any():
+                free_landing[near] = _flight(free, granules, near, disc_height, scene.flight, None).position_m
+            sample = rotations.plate_copied_sample(throw, local_landing, free_landing, free, near, turns[0], plates)
+            lost_kg = [0.0]
+        else:
+            sample, lost_kg = rotations.copied_sample(throws, np.split(local_landing, np.cumsum(counts)[:-1]),
+                                                     turns, parts, mirror)
     p = scene.pattern
     trays, replicate_masses = estimate.replicate_tray_masses(
         sample.x_m, sample.mass_kg, sample.replicate, int(granules.replicate.max()) + 1,

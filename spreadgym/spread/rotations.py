@@ -29,19 +29,30 @@ is rotation-equivariant about the disc's axis (drag, gravity and the Magnus lift
 the vertical axis turn with the granule), so a copy lands where its granule lands,
 turned by s. What they cost is a von Mises draw, a rotation and a tray bin each.
 
-When they apply (`copies_for`): plates break the symmetry (a turned granule meets them
-elsewhere and would need its own plate run, which costs as much as the spinner), so does
-a flight with a direction (wind or forward speed: every copy would have to fly), and a
-feed without spread has a single release angle. There the count is 1 and the run is the
-plain one, bit for bit.
+Plates break the symmetry: a turned granule meets them elsewhere and would need its own
+plate run. But a copy whose straight path clears every plate meets none, so it lands as
+its granule's plate-free throw, turned; the copies that come near a plate are stood for
+by their granule itself (`plate_copied_sample`, unbiased). One extra flight per granule
+whose own path comes near a plate is the whole cost.
+
+When they do not apply (`copies_for`): a flight with a direction (wind or forward speed:
+every copy would have to fly), a feed without spread (a single release angle) and
+plates beside two discs. There the count is 1 and the run is the plain one, bit for bit.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from typing import Sequence
+
 import numpy as np
 
-from spreadgym.config.scene import Flight, Scene
+from spreadgym.config.scene import Deflector, Flight, Scene
+from spreadgym.physics.constants import GRAVITY_M_S2
+from spreadgym.physics.departure import Departure
+from spreadgym.physics.geometry import advance_to_circle, zone_radius_m
 from spreadgym.physics.granules import GranuleBatch, pulled_back_by_clip
+from spreadgym.physics.stepped.pymunk_deflectors import near_plates
 from spreadgym.spread import von_mises
 from spreadgym.spread.estimate import TraySample
 from spreadgym.spread.twin import Disc, Throw, onto_disc_axis
@@ -50,17 +61,20 @@ COPY_STREAM = 1
 """Third word of the seed of the copies' angles (the sampler's uniforms use (seed, r))."""
 
 
-def copies_for(scene: Scene) -> tuple[int, str]:
-    """How many release angles each simulated granule takes in `scene`, and why."""
+def copies_for(scene: Scene, discs: int = 1) -> tuple[int, str]:
+    """How many release angles each simulated granule takes in `scene` (one of `discs` discs), and why."""
     asked = int(scene.sim.angle_copies)
     if asked == 1:
         return 1, "sim.angle_copies = 1"
-    if scene.deflectors:
-        return 1, "plates break the disc's rotational symmetry: one release angle per granule"
+    if scene.deflectors and discs > 1:
+        return 1, "plates beside two discs: one release angle per granule"
     if not flight_is_equivariant(scene.flight):
         return 1, "wind or forward speed gives the flight a direction: one release angle per granule"
     if scene.feed.spread_m == 0.0 or scene.feed.radius_m == 0.0:
         return 1, "the feed has a single release angle (no spread or on the axis): nothing to copy"
+    if scene.deflectors:
+        return asked, ("a feed spot and a flight without direction: copies whose path clears the plates are exact, "
+                       "the others are stood for by their granule (plate_copied_sample)")
     return asked, "no plates, a feed spot and a flight without direction: the copies are exact"
 
 
@@ -154,3 +168,58 @@ def copied_sample(throws: list[Throw], landings_m: list[np.ndarray], turns: list
         replicates.append(replicate)
         lost_kg.append(lost)
     return TraySample(np.concatenate(xs), np.concatenate(masses), np.concatenate(replicates)), lost_kg
+
+
+def straight_paths(departure: Departure, plates: Sequence[Deflector], radius_m: np.ndarray) -> Departure:
+    """Every departed granule's state where its straight plan-view path leaves the plate
+    zone, as if there were no plates: what both deflector stages hand the flight for a
+    granule that passes no plate (`pymunk_deflectors.deflect_pymunk`, closed form)."""
+    zone = zone_radius_m(plates, float(radius_m.max()))
+    gone = departure.departed
+    elapsed = np.zeros(departure.time_s.shape)
+    elapsed[gone] = advance_to_circle(departure.position_m[gone], departure.velocity_m_s[gone], zone)
+    position = departure.position_m.copy()
+    position[gone] = departure.position_m[gone] + elapsed[gone, None] * departure.velocity_m_s[gone]
+    return dataclasses.replace(
+        departure, position_m=position, time_s=departure.time_s + elapsed,
+        height_m=departure.height_m + departure.vertical_velocity_m_s * elapsed - 0.5 * GRAVITY_M_S2 * elapsed**2,
+        vertical_velocity_m_s=departure.vertical_velocity_m_s - GRAVITY_M_S2 * elapsed)
+
+
+def near_own_paths(throw: Throw, free: Departure, plates: Sequence[Deflector]) -> np.ndarray:
+    """(N,) bool: the departed granules whose own straight path comes near a plate (those
+    the pymunk stage steps); `free` from `straight_paths`."""
+    gone = np.flatnonzero(free.departed)
+    near = np.zeros(free.time_s.shape, dtype=bool)
+    near[gone] = near_plates(throw.departure.position_m[gone], free.position_m[gone], throw.granules.radius_m[gone],
+                             plates)
+    return near
+
+
+def plate_copied_sample(throw: Throw, landing_m: np.ndarray, free_landing_m: np.ndarray, free: Departure,
+                        near: np.ndarray, turn: Turn, plates: Sequence[Deflector]) -> TraySample:
+    """The tray sample of one disc's copies among plates (disc axis at the origin).
+
+    A copy whose straight path clears every plate (`near_plates`, with the pymunk stage's
+    margin) meets none in any deflector stage: it lands where its granule's plate-free
+    throw (`free`, landing at `free_landing_m`) lands, turned, and carries 1/K of the
+    granule's mass. Copies whose path comes near a plate are not simulated; the granule
+    itself stands for them: when its own path comes near a plate (`near`), it lands
+    where the full model puts it (`landing_m`) with its whole mass. Per granule the
+    sample is then (1/K) sum_k f(copy k) [copy k clears] + f(granule) [granule near],
+    whose mean is E f [clears] + E f [near] = E f: unbiased, as every copy and the
+    granule are draws from the granule distribution (docs/estimate.md). With K = 1 it is
+    the plain run."""
+    g = throw.granules
+    gone = np.flatnonzero(free.departed)
+    copies = turn.copies
+    rows = (np.arange(copies)[:, None] * g.count + gone[None, :]).ravel()  # departed copies, copy-major
+    tile = np.tile(gone, copies)
+    c, s = turn.cos[rows], turn.sin[rows]
+    clears = ~near_plates(throw.departure.position_m[tile], free.position_m[tile], g.radius_m[tile], plates,
+                          turn=(c, s))
+    at = free_landing_m[tile]
+    own = np.flatnonzero(near)
+    return TraySample(np.concatenate([(c * at[:, 0] - s * at[:, 1])[clears], landing_m[own, 0]]),
+                      np.concatenate([(g.mass_kg[tile] / copies)[clears], g.mass_kg[own]]),
+                      np.concatenate([g.replicate[tile][clears], g.replicate[own]]))

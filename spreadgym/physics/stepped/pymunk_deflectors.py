@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 import pymunk
@@ -72,11 +72,7 @@ def deflect_pymunk(
     gone = np.flatnonzero(departure.departed)
     t_edge = advance_to_circle(position[gone], velocity[gone], zone)
     end = position[gone] + t_edge[:, None] * velocity[gone]
-    near = np.zeros(gone.size, dtype=bool)
-    for plate in plates:
-        a, b = (np.asarray(p, dtype=float) for p in plate.endpoints())
-        reach = radius_m[gone] + 0.5 * plate.thickness_m + ZONE_MARGIN_M
-        near |= segment_distance(position[gone], end, a, b) <= reach
+    near = near_plates(position[gone], end, radius_m[gone], plates)
     straight = gone[~near]
     position[straight], elapsed[straight] = end[~near], t_edge[~near]
 
@@ -108,6 +104,24 @@ def deflect_pymunk(
         ],
         tracks=departure.tracks,
     )
+
+
+def near_plates(start: np.ndarray, end: np.ndarray, radius_m: np.ndarray, plates: Sequence[Deflector],
+                turn: Optional[tuple[np.ndarray, np.ndarray]] = None) -> np.ndarray:
+    """(N,) bool: whether the straight plan-view paths start[i]-end[i] pass within reach of
+    a plate (granule radius + half its thickness + ZONE_MARGIN_M); the others are moved to
+    the zone edge in closed form. `turn` = (cos, sin) per path: test against the plates
+    turned by minus that angle (the path turned by it, the same geometry)."""
+    near = np.zeros(start.shape[0], dtype=bool)
+    for plate in plates:
+        a, b = (np.asarray(p, dtype=float) for p in plate.endpoints())
+        if turn is not None:
+            c, s = turn
+            a = np.column_stack([c * a[0] + s * a[1], c * a[1] - s * a[0]])
+            b = np.column_stack([c * b[0] + s * b[1], c * b[1] - s * b[0]])
+        reach = radius_m + 0.5 * plate.thickness_m + ZONE_MARGIN_M
+        near |= segment_distance(start, end, a, b) <= reach
+    return near
 
 
 def segment_distance(p0: np.ndarray, p1: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
