@@ -128,3 +128,28 @@ def test_a_bad_thread_count_is_a_one_line_error(monkeypatch, value):
         threads.thread_count()
     with pytest.raises(ConfigError, match="--threads"):
         threads.set_threads(value)
+
+
+def test_inside_a_ray_task_the_count_is_the_task_cpus(monkeypatch):
+    """A Ray worker's numba threads never multiply with its neighbours': the task's CPUs."""
+    import sys
+    import types
+
+    class Context:
+        def __init__(self, cpus):
+            self.cpus = cpus
+
+        def get_assigned_resources(self):
+            return {"CPU": self.cpus} if self.cpus else {}
+
+    fake = types.SimpleNamespace(is_initialized=lambda: True, get_runtime_context=lambda: Context(3.0))
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    monkeypatch.delenv(threads.ENV_VAR, raising=False)
+    assert threads.thread_count() == 3
+    fake.get_runtime_context = lambda: Context(0.5)  # a fractional share still gets one thread
+    assert threads.thread_count() == 1
+    fake.get_runtime_context = lambda: Context(None)  # the driver: not a task
+    assert threads.thread_count() == len(os.sched_getaffinity(0))
+    monkeypatch.setenv(threads.ENV_VAR, "2")  # the variable wins over Ray
+    fake.get_runtime_context = lambda: Context(3.0)
+    assert threads.thread_count() == 2
