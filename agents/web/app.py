@@ -1,4 +1,4 @@
-"""The web app of `spreadgym serve`: the pattern page, the chart page and their JSON API.
+"""The web app of `spreadgym serve`: the pattern, chart and fit pages and their JSON API.
 
 Every error is `{"error": "..."}`: bad input 422 with the CLI's one-line message, a
 missing chart 404, a body over MAX_BODY_BYTES 413. The app serves its own files and
@@ -18,7 +18,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from starlette.exceptions import HTTPException
 
-from spreadgym.agents.web import charts, pattern
+from spreadgym.agents.web import charts, fit, pattern
 from spreadgym.errors import SpreadgymError
 
 MAX_BODY_BYTES = 1_000_000  # a request body (an uploaded scene is about 1.5 kB)
@@ -130,6 +130,10 @@ def create_app(charts_dir: Path = Path("out/charts")) -> FastAPI:
     def pattern_view(request: pattern.SimulateRequest):
         return Response(pattern.pattern_payload(request), media_type="application/json")
 
+    @app.post("/api/fit")
+    def fit_view(request: fit.FitRequest):
+        return Response(fit.fit_payload(request), media_type="application/json")
+
     @app.get("/api/charts")
     def chart_list():
         return {"charts": charts.chart_folders(jobs.root)}
@@ -174,5 +178,9 @@ def create_app(charts_dir: Path = Path("out/charts")) -> FastAPI:
     @app.get("/charts")
     def chart_page():
         return FileResponse(STATIC / "charts.html")
+
+    @app.get("/fit")
+    def fit_page():
+        return FileResponse(STATIC / "fit.html")
 
     return app

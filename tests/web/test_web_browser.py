@@ -168,3 +168,29 @@ def test_an_uploaded_scene_drives_the_page(server, driver, tmp_path):
     broken.write_text("spinner: [unclosed")
     driver.find_element(By.ID, "upload").send_keys(str(broken))
     _wait(driver, "return document.getElementById('error').textContent.includes('uploaded scene')")
+
+
+def test_the_fit_page_fits_a_tray_test(server, driver, tmp_path):
+    from selenium.webdriver.common.by import By
+
+    from spreadgym.config.scene import load_scene
+    from spreadgym.fit.synthetic import synthetic_tray_test
+    from spreadgym.fit.trays import write_trays
+
+    key = "contact.vane_restitution"
+    test = synthetic_tray_test(load_scene("paper"), {key: 0.5}, model="compiled", granules=4096, noise_seed=3)
+    trays = write_trays(tmp_path / "trays.csv", test, "synthetic, restitution 0.5")
+    driver.get(server + "/fit")
+    _wait(driver, "return document.getElementById('scene').options.length > 0")
+    driver.find_element(By.ID, "trays").send_keys(str(trays))
+    granules = driver.find_element(By.ID, "granules")
+    granules.clear()
+    granules.send_keys("1024")
+    driver.find_element(By.ID, "start").click()
+    _wait(driver, "return document.body.dataset.fitted === 'yes' || document.getElementById('error').textContent")
+    assert driver.find_element(By.ID, "error").text == ""
+    assert key in driver.find_element(By.ID, "estimates").text
+    assert driver.find_element(By.CSS_SELECTOR, "#download a").get_attribute("download") == "paper-fitted.yaml"
+    shots = _shots()
+    if shots:
+        driver.save_screenshot(str(shots / "fit.png"))
