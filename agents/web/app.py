@@ -71,6 +71,9 @@ class BodyLimit:
 def _one_line(exc: RequestValidationError) -> str:
     """The first problem of a request body, as 'key: message'."""
     first = exc.errors()[0]
+    if first.get("type") == "json_invalid":
+        return f"body: not valid JSON ({first.get('ctx', {}).get('error', 'decode error')} at character " \
+               f"{first.get('loc', ('', '?'))[-1]})"
     where = ".".join(str(part) for part in first.get("loc", ()) if part != "body") or "body"
     return f"{where}: {first.get('msg', 'invalid')}"
 
@@ -106,6 +109,10 @@ def create_app(charts_dir: Path = Path("out/charts")) -> FastAPI:
     @app.exception_handler(RequestValidationError)
     async def bad_request(_request: Request, exc: RequestValidationError):
         return JSONResponse({"error": _one_line(exc)}, status_code=422)
+
+    @app.exception_handler(Exception)
+    async def failed(_request: Request, exc: Exception):  # a bug's one line; the server carries on
+        return JSONResponse({"error": f"internal error: {type(exc).__name__}: {exc}"}, status_code=500)
 
     @app.get("/api/health")
     def health():
