@@ -159,11 +159,12 @@ def verify_p90(spec: ChartSpec, cell: Cell, scene, settings: dict, seq: np.rando
     library = var.draw_library(load_library(), cell.fertilizer, cell_draws)
     scenes = [scene_with(scene, var.perturbed(scene, settings, d, library)) for d in cell_draws]
     results = run_batch(scenes, model=spec.verify_model, library=library, ci=False)
-    cvs = [objective(r.metrics, cell.width_m)[1] for r in results]
+    found = [objective(r.metrics, cell.width_m) for r in results]
+    cvs = [f[1] for f in found]
     q = spec.variability["quantile"]
     return {"cv_percent": var.quantile(cvs, q), "standard_error_percent": var.bootstrap_se(cvs, q, bootstrap_seq),
             "draws": len(cvs), "runs_per_draw": 1, "granules": scene.sim.granules, "model": spec.verify_model,
-            "cv_draws_percent": cvs}
+            "cv_draws_percent": cvs, "cv_draws_standard_error_percent": [f[2] for f in found]}
 
 
 def run_cell(spec: ChartSpec, cell: Cell, previous: Optional[dict] = None) -> dict:

@@ -76,9 +76,10 @@ class ChartSpec:
         return [Cell(f, w) for f in self.fertilizers for w in self.widths_m]
 
     def previous(self, cell: Cell) -> Optional[Cell]:
-        """The cell one width narrower in the same row (its settings start this cell's search), or None."""
+        """The cell one width narrower in the same row (its settings start this cell's search), or
+        None: the first width, or no search (`policy`: every cell stands alone)."""
         i = self.widths_m.index(cell.width_m)
-        return Cell(cell.fertilizer, self.widths_m[i - 1]) if i > 0 else None
+        return Cell(cell.fertilizer, self.widths_m[i - 1]) if i > 0 and self.method != "policy" else None
 
     @property
     def draws(self) -> int:
