@@ -179,3 +179,11 @@ def test_unknown_names_are_cut_short_in_messages():
     with pytest.raises(ConfigError) as err:
         parse_assignment("name=[" + "1" * 100_000)
     assert len(str(err.value)) < 300
+
+
+@pytest.mark.parametrize("name", ["paper", "paper-deflectors", "field", "twin-field"])
+def test_every_shipped_scene_has_a_valid_settings_box(name):
+    """Its adjustable ranges (plates included) stay clear of the disc: an env or a chart can start on it."""
+    from spreadgym.config.settings import SettingsSpace
+
+    assert SettingsSpace(load_scene(name)).size >= 2
