@@ -151,9 +151,13 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
     """`env.reset(seed=seed, options=options)` then `env.step(action)` for each reset and
     action in turn, on one SpinnerDesign env (wrappers included): the same returns, bit
     for bit, with the tray tests run as one batch. Each job is reset twice: once to learn
-    the scene its step runs, once to step it."""
+    the scene its step runs, once to step it. An env that pools runs to a precision or
+    renders steps each job itself."""
     base = env.unwrapped
     task = base.task
+    if task.cfg.precision is not None or base.render_mode is not None:
+        return [(env.reset(seed=seed, options=options), env.step(action))[1]
+                for (seed, options), action in zip(resets, actions)]
     scenes = []
     for (seed, options), action in zip(resets, actions):
         env.reset(seed=seed, options=options)

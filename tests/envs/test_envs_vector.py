@@ -120,3 +120,13 @@ def test_step_designs_equals_reset_and_step_one_after_another():
         assert reward == r and (terminated, truncated) == (te, tr)
         assert info["metrics"] == i["metrics"]
     assert "run" not in env.unwrapped.task.__dict__  # the task runs its own scenes again
+
+
+def test_step_designs_with_a_precision_steps_each_job_itself():
+    from spreadgym.envs.vector import step_designs
+
+    env = gym.make("spreadgym/SpinnerDesign-v0", precision=5.0, **SMALL)
+    action = np.zeros(env.action_space.shape)
+    (_, reward, *_), = step_designs(env, [(7, None)], [action])
+    env.reset(seed=7)
+    assert env.step(action)[1] == reward
