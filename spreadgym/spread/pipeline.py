@@ -15,6 +15,7 @@ import numpy as np
 
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Flight, Scene
+from spreadgym.physics.analytic.deflector_rays import deflect as deflect_by_rays
 from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.departure import Departure, tilted_by_cone
 from spreadgym.physics.granules import GranuleBatch, sample_granules
@@ -160,13 +161,7 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
         time_s[gone] = flown.time_s
         landing = flight_model.Landing(local_landing[flying] + centre[flying], time_s[flying])
         if parts[0].scene.deflectors:  # one disc among plates (rotations.copies_for)
-            plates, throw = parts[0].scene.deflectors, throws[0]
-            free = rotations.straight_paths(throw.departure, plates, granules.radius_m)
-            near = rotations.near_own_paths(throw, free, plates)
-            free_landing = local_landing.copy()
-            if near.any():
-                free_landing[near] = _flight(free, granules, near, disc_height, scene.flight, None).position_m
-            sample = rotations.plate_copied_sample(throw, local_landing, free_landing, free, near, turns[0], plates)
+            sample = _plate_sample(throws[0], parts[0].scene, plan.spins[0][1], local_landing, turns[0])
             lost_kg = [0.0]
         else:
             sample, lost_kg = rotations.copied_sample(throws, np.split(local_landing, np.cumsum(counts)[:-1]),
@@ -208,6 +203,32 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
     )
     return SimulationResult(scene, granules, departure, launch, flying, landing, sample, trays, replicate_masses,
                             metrics)
+
+
+def _plate_sample(throw: twin.Throw, disc: Scene, contacts: Contacts, landing_m: np.ndarray,
+                  turn: rotations.Turn) -> estimate.TraySample:
+    """The tray sample of one disc's release-angle copies among plates: copies whose path
+    clears the plates land as their granule's plate-free throw, turned (it flies once per
+    granule); copy 0 is the granule's own run; the other copies near a plate pass the
+    plates by the closed-form ray stage (`deflector_rays`, within 2 % of the pymunk stage)
+    and fly each on its own."""
+    plates, g = disc.deflectors, throw.granules
+    free = rotations.straight_paths(throw.departure, plates, g.radius_m)
+    near = rotations.near_own_paths(throw, free, plates)
+    free_landing = landing_m.copy()
+    height = np.full(g.count, disc.spinner.height_m)
+    if near.any():
+        free_landing[near] = _flight(free, g, near, height, disc.flight, None).position_m
+    copies = rotations.plate_copies(throw, free, turn, plates)
+    replayed = copies.replayed
+    turned = rotations.turned_departures(throw.departure, copies, replayed)
+    who = copies.granule[replayed]
+    launch = deflect_by_rays(turned, plates, contacts, g.radius_m[who], disc.granule.rotation)
+    landed = _flight(launch, dataclasses.replace(g, diameter_m=g.diameter_m[who], mass_kg=g.mass_kg[who],
+                                                 release_xy_m=g.release_xy_m[who], phase_rad=g.phase_rad[who],
+                                                 replicate=g.replicate[who]),
+                     np.ones(who.size, dtype=bool), height[who], disc.flight, None)
+    return rotations.plate_copied_sample(throw, copies, landing_m, free_landing, landed.position_m[:, 0], turn.copies)
 
 
 def _flight(launch: Departure, granules: GranuleBatch, flying: np.ndarray, disc_height_m: np.ndarray,

@@ -29,11 +29,12 @@ is rotation-equivariant about the disc's axis (drag, gravity and the Magnus lift
 the vertical axis turn with the granule), so a copy lands where its granule lands,
 turned by s. What they cost is a von Mises draw, a rotation and a tray bin each.
 
-Plates break the symmetry: a turned granule meets them elsewhere and would need its own
-plate run. But a copy whose straight path clears every plate meets none, so it lands as
-its granule's plate-free throw, turned; the copies that come near a plate are stood for
-by their granule itself (`plate_copied_sample`, unbiased). One extra flight per granule
-whose own path comes near a plate is the whole cost.
+Plates break the symmetry: a turned granule meets them elsewhere. But a copy whose
+straight path clears every plate meets none, so it lands as its granule's plate-free
+throw, turned (one extra flight per granule whose own path comes near a plate); copy 0
+is the granule's own run; the other copies near a plate pass the plates by the
+closed-form ray stage and fly each on their own (`plate_copies`, `plate_copied_sample`;
+spread.pipeline runs the stages).
 
 When they do not apply (`copies_for`): a flight with a direction (wind or forward speed:
 every copy would have to fly), a feed without spread (a single release angle) and
@@ -74,7 +75,7 @@ def copies_for(scene: Scene, discs: int = 1) -> tuple[int, str]:
         return 1, "the feed has a single release angle (no spread or on the axis): nothing to copy"
     if scene.deflectors:
         return asked, ("a feed spot and a flight without direction: copies whose path clears the plates are exact, "
-                       "the others are stood for by their granule (plate_copied_sample)")
+                       "the others near a plate pass it by the closed-form ray stage")
     return asked, "no plates, a feed spot and a flight without direction: the copies are exact"
 
 
@@ -196,30 +197,64 @@ def near_own_paths(throw: Throw, free: Departure, plates: Sequence[Deflector]) -
     return near
 
 
-def plate_copied_sample(throw: Throw, landing_m: np.ndarray, free_landing_m: np.ndarray, free: Departure,
-                        near: np.ndarray, turn: Turn, plates: Sequence[Deflector]) -> TraySample:
-    """The tray sample of one disc's copies among plates (disc axis at the origin).
+@dataclasses.dataclass(frozen=True)
+class PlateCopies:
+    """The departed copies of one disc among plates, copy-major: their granule, copy
+    number, turn (cos, sin) and whether their straight path clears every plate."""
 
-    A copy whose straight path clears every plate (`near_plates`, with the pymunk stage's
-    margin) meets none in any deflector stage: it lands where its granule's plate-free
-    throw (`free`, landing at `free_landing_m`) lands, turned, and carries 1/K of the
-    granule's mass. Copies whose path comes near a plate are not simulated; the granule
-    itself stands for them: when its own path comes near a plate (`near`), it lands
-    where the full model puts it (`landing_m`) with its whole mass. Per granule the
-    sample is then (1/K) sum_k f(copy k) [copy k clears] + f(granule) [granule near],
-    whose mean is E f [clears] + E f [near] = E f: unbiased, as every copy and the
-    granule are draws from the granule distribution (docs/estimate.md). With K = 1 it is
-    the plain run."""
-    g = throw.granules
+    granule: np.ndarray
+    copy: np.ndarray
+    cos: np.ndarray
+    sin: np.ndarray
+    clears: np.ndarray
+
+    @property
+    def replayed(self) -> np.ndarray:
+        """The copies whose plate stage is run again (near a plate, not the granule itself)."""
+        return ~self.clears & (self.copy > 0)
+
+
+def plate_copies(throw: Throw, free: Departure, turn: Turn, plates: Sequence[Deflector]) -> PlateCopies:
+    """Which departed copies clear the plates: a copy's straight path is its granule's
+    turned, so it is tested against the plates turned back (`near_plates`, the pymunk
+    stage's test and margin); copy 0 is the granule itself."""
     gone = np.flatnonzero(free.departed)
-    copies = turn.copies
-    rows = (np.arange(copies)[:, None] * g.count + gone[None, :]).ravel()  # departed copies, copy-major
-    tile = np.tile(gone, copies)
+    granule = np.tile(gone, turn.copies)
+    copy = np.repeat(np.arange(turn.copies), gone.size)
+    rows = copy * throw.granules.count + granule
     c, s = turn.cos[rows], turn.sin[rows]
-    clears = ~near_plates(throw.departure.position_m[tile], free.position_m[tile], g.radius_m[tile], plates,
-                          turn=(c, s))
-    at = free_landing_m[tile]
-    own = np.flatnonzero(near)
-    return TraySample(np.concatenate([(c * at[:, 0] - s * at[:, 1])[clears], landing_m[own, 0]]),
-                      np.concatenate([(g.mass_kg[tile] / copies)[clears], g.mass_kg[own]]),
-                      np.concatenate([g.replicate[tile][clears], g.replicate[own]]))
+    clears = ~near_plates(throw.departure.position_m[granule], free.position_m[granule],
+                          throw.granules.radius_m[granule], plates, turn=(c, s))
+    return PlateCopies(granule, copy, c, s, clears)
+
+
+def turned_departures(departure: Departure, copies: PlateCopies, which: np.ndarray) -> Departure:
+    """The disc-edge states of the copies `which` (a mask over `copies`): their granules'
+    states turned by the copies' angles about the disc axis."""
+    g, c, s = copies.granule[which], copies.cos[which], copies.sin[which]
+    p, v = departure.position_m[g], departure.velocity_m_s[g]
+    return Departure(
+        position_m=np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]]),
+        velocity_m_s=np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]]),
+        spin_rad_s=departure.spin_rad_s[g], height_m=departure.height_m[g],
+        vertical_velocity_m_s=departure.vertical_velocity_m_s[g], time_s=departure.time_s[g],
+        outcome=departure.outcome[g], model=departure.model, dt_s=departure.dt_s)
+
+
+def plate_copied_sample(throw: Throw, copies: PlateCopies, landing_m: np.ndarray, free_landing_m: np.ndarray,
+                        replayed_x_m: np.ndarray, count: int) -> TraySample:
+    """The tray sample of one disc's `count` copies among plates (disc axis at the origin),
+    each copy 1/count of its granule's mass.
+
+    A copy whose straight path clears every plate meets none in any deflector stage: it
+    lands where its granule's plate-free throw lands (`free_landing_m`), turned. Copy 0
+    near a plate is the granule itself, landing where the model's own plate stage put it
+    (`landing_m`). The other copies near a plate had their plate stage run again
+    (`replayed_x_m`, across the track, in the order of `copies.replayed`)."""
+    g = throw.granules
+    clear, own = copies.clears, ~copies.clears & (copies.copy == 0)
+    at = free_landing_m[copies.granule[clear]]
+    x = np.concatenate([copies.cos[clear] * at[:, 0] - copies.sin[clear] * at[:, 1],
+                        landing_m[copies.granule[own], 0], replayed_x_m])
+    order = np.concatenate([copies.granule[clear], copies.granule[own], copies.granule[copies.replayed]])
+    return TraySample(x, g.mass_kg[order] / count, g.replicate[order])

@@ -179,9 +179,9 @@ def test_copies_leave_the_cv_unbiased_and_cut_its_spread():
 
 @pytest.mark.slow
 def test_plate_copies_keep_the_uncopied_mean_and_cut_the_spread():
-    """paper-deflectors with 32 release angles (copies that clear the plates, the granule
-    itself for those that do not) against one angle, over 24 seeds each: the same mean
-    CV and the same mean pattern centre (within 3 standard errors), a smaller spread."""
+    """paper-deflectors with 32 release angles (copies that clear the plates turned, the
+    others near a plate through the ray stage) against one angle, over 24 seeds each: the
+    same mean CV and the same mean pattern centre (within 3 standard errors), a smaller spread."""
     base = load_scene("paper-deflectors", {"sim.granules": 1024})
     found = {}
     for copies in (32, 1):
@@ -197,7 +197,7 @@ def test_plate_copies_keep_the_uncopied_mean_and_cut_the_spread():
         a, b = found[32][k], found[1][k]
         se = np.hypot(a.std(ddof=1), b.std(ddof=1)) / np.sqrt(a.size)
         assert abs(a.mean() - b.mean()) < 3.0 * se, (k, a.mean(), b.mean(), se)
-    assert found[32][0].std(ddof=1) < 0.8 * found[1][0].std(ddof=1)
+    assert found[32][0].std(ddof=1) < 0.5 * found[1][0].std(ddof=1)
 
 
 def test_a_plate_copy_that_clears_the_plates_lands_as_its_granule_turned():
