@@ -153,17 +153,20 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
 
 
 def verify_p90(spec: ChartSpec, cell: Cell, scene, settings: dict, seq: np.random.SeedSequence) -> dict:
-    """The winner on `verify_draws` fresh draws, one full-model run each: the quantile and its bootstrap SE."""
+    """The winner on `verify_draws` fresh draws, `verify_runs_per_draw` full-model runs pooled each: the
+    quantile and its bootstrap SE."""
     draws_seq, bootstrap_seq = var.child(seq, 0), var.child(seq, 1)
     cell_draws = var.draws(spec.variability, spec.variability["verify_draws"], draws_seq)
     library = var.draw_library(load_library(), cell.fertilizer, cell_draws)
-    scenes = [scene_with(scene, var.perturbed(scene, settings, d, library)) for d in cell_draws]
+    runs = spec.variability["verify_runs_per_draw"]  # n runs pooled are one run of n times the granules
+    pooled = {"sim.granules": runs * scene.sim.granules, "sim.replicates": runs * scene.sim.replicates}
+    scenes = [scene_with(scene, var.perturbed(scene, settings, d, library) | pooled) for d in cell_draws]
     results = run_batch(scenes, model=spec.verify_model, library=library, ci=False)
     found = [objective(r.metrics, cell.width_m) for r in results]
     cvs = [f[1] for f in found]
     q = spec.variability["quantile"]
     return {"cv_percent": var.quantile(cvs, q), "standard_error_percent": var.bootstrap_se(cvs, q, bootstrap_seq),
-            "draws": len(cvs), "runs_per_draw": 1, "granules": scene.sim.granules, "model": spec.verify_model,
+            "draws": len(cvs), "runs_per_draw": runs, "granules": runs * scene.sim.granules, "model": spec.verify_model,
             "cv_draws_percent": cvs, "cv_draws_standard_error_percent": [f[2] for f in found]}
 
 
@@ -205,7 +208,7 @@ def run_cell(spec: ChartSpec, cell: Cell, previous: Optional[dict] = None) -> di
            "cv_percent": cv, "cv_standard_error_percent": cv_se,
            "cv_p90_percent": p90["cv_percent"], "cv_p90_standard_error_percent": p90["standard_error_percent"],
            "effective_swath_m": reference.effective_swath_m, "cv_search_percent": found["cv"],
-           "simulations": scorer.simulations + spec.verify_runs + p90["draws"],
+           "simulations": scorer.simulations + spec.verify_runs + p90["draws"] * p90["runs_per_draw"],
            "wall_s": time.perf_counter() - started}
     detail = {
         "key": cell.key,

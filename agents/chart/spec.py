@@ -87,9 +87,14 @@ class ChartSpec:
         return self.variability["draws"] if self.objective == "robust" else 1
 
     @property
+    def verify_simulations(self) -> int:
+        """Full-model runs of a cell's verification: nominal and over the variability model."""
+        return self.verify_runs + self.variability["verify_draws"] * self.variability["verify_runs_per_draw"]
+
+    @property
     def max_simulations(self) -> int:
         """Most simulations a cell may make: the search's and the verification's."""
-        return self.budget * self.draws + self.verify_runs + self.variability["verify_draws"]
+        return self.budget * self.draws + self.verify_simulations
 
     def manifest(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -242,6 +247,7 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
     try:
         scene = spec.cell_scene(spec.cells[0])
         check_pooled_work(scene, spec.verify_runs, "--granules")
+        check_pooled_work(scene, variability["verify_runs_per_draw"], "variability.verify_runs_per_draw")
     except ConfigError as exc:
         if exc.key == "sim.granules":
             raise SpreadgymError(f"--granules: {exc.message}") from None

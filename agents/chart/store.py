@@ -213,8 +213,8 @@ def record_problem(spec: ChartSpec, cell: Cell, record: Any) -> Optional[str]:
         return "a result is not a finite number >= 0"
     if (detail["objective"], detail["method"]) != (spec.objective, spec.method):
         return "its objective or method is not the spec's"
-    verified = spec.verify_runs + spec.variability["verify_draws"]
-    if not (isinstance(row["simulations"], int) and verified <= row["simulations"] <= spec.max_simulations):
+    if not (isinstance(row["simulations"], int)
+            and spec.verify_simulations <= row["simulations"] <= spec.max_simulations):
         return "its simulation count is not the spec's"
     trays, curve = detail["trays"], detail["cv_curve"]
     if not (isinstance(trays, dict) and _reals(trays.get("center_m")) and _reals(trays.get("mass_kg"), 0.0)

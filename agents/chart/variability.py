@@ -34,8 +34,7 @@ from spreadgym.physics.contacts import resolve_contacts
 VARIABILITY_FILE = "chart_variability.yaml"
 FACTORS = ("disc_friction", "vane_friction", "restitution", "size_median", "density", "disc_speed")
 OFFSETS = ("vane_pitch_deg",)
-COUNTS = ("draws", "verify_draws")
-MAX_DRAWS = 1024
+COUNTS = {"draws": (2, 1024), "verify_draws": (2, 1024), "verify_runs_per_draw": (1, 8)}  # integers, ranges
 MAX_FACTOR = 0.5  # a relative half-range: a quantity within +-50 %
 MAX_PITCH_OFFSET_DEG = 10.0
 
@@ -62,8 +61,9 @@ def check_variability(given: Union[None, str, Path, Mapping[str, Any]]) -> dict:
             raise SpreadgymError(f"{where}: unknown key; known: {', '.join(merged)}")
         number = isinstance(value, (int, float)) and not isinstance(value, bool)
         if key in COUNTS:
-            if not (number and float(value).is_integer() and 2 <= value <= MAX_DRAWS):
-                raise SpreadgymError(f"{where}: {value!r} is out of range; allowed an integer in [2, {MAX_DRAWS}]")
+            low, high = COUNTS[key]
+            if not (number and float(value).is_integer() and low <= value <= high):
+                raise SpreadgymError(f"{where}: {value!r} is out of range; allowed an integer in [{low}, {high}]")
             value = int(value)
         elif key == "quantile":
             if not (number and 0.5 <= value < 1.0):

@@ -29,11 +29,13 @@ def test_defaults_are_the_documented_ones_and_overrides_are_checked():
     assert {k: v[k] for k in var.FACTORS + var.OFFSETS} == {
         "disc_friction": 0.15, "vane_friction": 0.15, "restitution": 0.10, "size_median": 0.10, "density": 0.05,
         "disc_speed": 0.02, "vane_pitch_deg": 1.0}
-    assert (v["draws"], v["verify_draws"], v["quantile"]) == (16, 16, 0.9)
+    assert (v["draws"], v["verify_draws"], v["verify_runs_per_draw"], v["quantile"]) == (16, 16, 1, 0.9)
     assert var.check_variability({"density": 0.0, "draws": 8})["draws"] == 8
     for bad, message in [({"humidity": 0.1}, "variability.humidity: unknown key"),
                          ({"density": 0.9}, r"variability.density: 0.9 is out of range; allowed \[0, 0.5\]"),
                          ({"draws": 1}, "variability.draws: 1 is out of range"),
+                         ({"verify_runs_per_draw": 0}, r"verify_runs_per_draw: 0 is out of range; allowed an integer "
+                                                       r"in \[1, 8\]"),
                          ({"quantile": 1.0}, "variability.quantile")]:
         with pytest.raises(SpreadgymError, match=message):
             var.check_variability(bad)
@@ -70,6 +72,7 @@ def test_every_candidate_of_a_cell_meets_the_same_draws():
 
 def test_the_p90_is_the_full_model_over_the_rows_settings_on_fresh_draws(tmp_path):
     spec = make_spec("paper", FERTILIZER, "3", **SMALL)[0]
+    assert spec.verify_simulations == 2 + 4
     result = run_chart(spec, tmp_path / "c", engine="local", progress=False)
     row, cell = result.payload["rows"][0], spec.cells[0]
     detail = json.loads((tmp_path / "c" / "cells" / f"{cell.key}.json").read_text(encoding="utf-8"))["detail"]
@@ -181,3 +184,14 @@ def test_quality_counts_reversals_and_the_robust_targets():
     # rpm turns by 20 of 600 and of 580 (3.3 and 3.4 %); pitch by 4 deg at 4 m and 3 deg (not over) at 5 m
     assert quality["reversals"]["a"] == {"rpm": [], "pitch": [(4, 4.0)]}
     assert (quality["rpm_reversals"], quality["pitch_reversals"]) == (0, 1)
+
+
+def test_pooled_runs_per_batch_are_one_run_of_their_granules():
+    from spreadgym.agents.chart.search import verify_p90
+
+    spec = make_spec("paper", FERTILIZER, "3", **{**SMALL, "variability": {**DRAWS, "verify_runs_per_draw": 3}})[0]
+    cell = spec.cells[0]
+    scene = spec.cell_scene(cell)
+    p90 = verify_p90(spec, cell, scene, {"spinner.rpm": 700.0, "vanes.pitch_deg": 5.0}, np.random.SeedSequence(1))
+    assert (p90["runs_per_draw"], p90["granules"], p90["draws"]) == (3, 3 * 64, 4)
+    assert spec.verify_simulations == 2 + 4 * 3
