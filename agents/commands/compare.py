@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     train_kwargs = policies[0][1].env_kwargs if policies else {}
     env_kwargs = evaluation_env_kwargs(train_kwargs, args.granules)
     env = _env(env_id, env_kwargs)  # checks the kwargs here
-    env_kwargs = {**env_kwargs, "granules": env.unwrapped.config.granules}  # the count that runs, said out loud
+    env_kwargs = {**env_kwargs, "granules": env.unwrapped.task.base_scene.sim.granules}  # the count that runs
     jobs = ev.evaluation_set(args.fertilizers, args.swaths)
     from spreadgym.agents.commands.evaluate import _check_jobs
 

@@ -81,7 +81,7 @@ class Task:
         self._jobs: dict[Context, tuple[Scene, dict[str, float]]] = {}
         base = load_scene(cfg.scene, cfg.scene_overrides)
         try:
-            self.base_scene = scene_with(base, {"sim.granules": cfg.granules})
+            self.base_scene = base if cfg.granules is None else scene_with(base, {"sim.granules": cfg.granules})
         except ConfigError as exc:  # the bound on a run's work: `granules` is the env's key for it
             raise ConfigError("granules" if exc.key == "sim.granules" else exc.key, exc.message) from None
         ctx = cfg.context

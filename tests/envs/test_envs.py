@@ -369,10 +369,16 @@ def test_reset_options_fix_the_job():
 def test_yaml_defaults_are_the_documented_ones():
     for name in (DESIGN, TUNING):
         cfg = load_env_config(name)
-        assert cfg.model == "auto" and cfg.scene == "paper" and cfg.granules == 2048
+        assert cfg.model == "auto" and cfg.scene == "paper" and cfg.granules is None  # the scene's own count
         assert cfg.settings.rpm == (200.0, 1100.0) and cfg.settings.pitch_deg == (-30.0, 30.0)
         assert cfg.context.fertilizers == ["mixture-17-21-17", "compound-10-16-10", "pellet"]
         assert cfg.fallback_restitution.disc == cfg.fallback_restitution.vane == 0.43
+
+
+def test_the_default_granule_count_is_the_scenes_own():
+    for scene, granules in (("paper", 2048), ("paper-deflectors", 4096)):
+        env = gym.make("spreadgym:SpinnerDesign-v0", scene=scene)
+        assert env.unwrapped.task.base_scene.sim.granules == granules
 
 
 def test_kwargs_override_the_config():
