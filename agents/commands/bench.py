@@ -15,7 +15,7 @@ from spreadgym.cli import arguments
 from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
-            "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "batch")
+            "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "env-noise", "batch")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
         "vector-env": lambda: vector_env_steps_per_second(repeats=args.repeats),
         "startup": lambda: startup.startup_rows(repeats=args.repeats),
         "precision": lambda: precision_rows(estimate_bench, args.out, say),
+        "env-noise": lambda: env_reward_noise(),
         "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
     }
     plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy,
@@ -120,6 +121,35 @@ def precision_rows(estimate_bench, out: Path, say) -> list[dict]:
     """simulate's default precision against the converged full model; also as markdown."""
     rows = estimate_bench.precision_rows(out / "references", progress=say)
     (out / "precision.md").write_text(estimate_bench.precision_markdown(rows), encoding="utf-8")
+    return rows
+
+
+def env_reward_noise(seeds: int = 24) -> list[dict]:
+    """SpinnerDesign at its default budget: the s.d. over seeds of the CV (pp) and of the
+    reward for one job and one action (compound 10-16-10 on the paper scene's own job,
+    the scene's settings), on each shipped single-disc scene. The noise an agent sees."""
+    import gymnasium as gym
+    import numpy as np
+
+    import spreadgym  # noqa: F401  (registers the ids)
+
+    rows = []
+    for scene in ("paper", "field", "paper-deflectors"):
+        env = gym.make("spreadgym/SpinnerDesign-v0", scene=scene)
+        base = env.unwrapped.task.base_scene
+        job = {"fertilizer": base.fertilizer, "target_swath_m": base.pattern.target_swath_m,
+               "forward_speed_m_s": 0.0, "wind_m_s": [0.0, 0.0]}
+        smap = env.unwrapped.task.settings_map
+        action = smap.to_unit(smap.from_scene(base)).astype(np.float32)
+        cvs, rewards = [], []
+        for seed in range(seeds):
+            env.reset(seed=seed, options={"context": job})
+            _, reward, _, _, info = env.step(action)
+            cvs.append(info["metrics"]["cv_percent_at_target"])
+            rewards.append(reward)
+        rows.append({"scene": scene, "granules": base.sim.granules, "seeds": seeds,
+                     "cv_mean_percent": float(np.mean(cvs)), "cv_sd_pp": float(np.std(cvs, ddof=1)),
+                     "reward_mean": float(np.mean(rewards)), "reward_sd": float(np.std(rewards, ddof=1))})
     return rows
 
 
