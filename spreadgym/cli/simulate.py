@@ -42,6 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              f"are pooled until it is reached (default {SIMULATE_PRECISION_PP:g})")
     parser.add_argument("--max-runs", type=arguments.integer(2, MAX_RUNS_LIMIT), default=SIMULATE_MAX_RUNS,
                         metavar="N", help=f"at most N runs of sim.granules each (default {SIMULATE_MAX_RUNS})")
+    parser.add_argument("--threads", type=arguments.integer(1, 4096), metavar="N",
+                        help="threads to use (default: SPREADGYM_THREADS, else every core this process may use)")
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
     parser.add_argument("--plot", type=arguments.output_folder, metavar="DIR", help="write PNG pictures into DIR")
 
@@ -51,7 +53,10 @@ def run(args: argparse.Namespace) -> int:
 
     from spreadgym.config.scene import load_scene
     from spreadgym.spread.precision import simulate_precisely
+    from spreadgym.threads import set_threads
 
+    if args.threads is not None:
+        set_threads(args.threads)
     scene = load_scene(args.scene, parse_assignments(args.overrides))
     with tqdm(desc="runs", unit="run", file=sys.stderr, disable=None, leave=False) as bar:
         precise = simulate_precisely(scene, args.precision, args.max_runs, model=args.model,

@@ -101,3 +101,12 @@ def test_reference_names_its_flag_when_granules_exceed_the_work_bound(capsys):
     assert main(["reference", "--granules", "1000000", "--replicates", "2"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("spreadgym reference: error: --granules:") and "\n" not in err
+
+
+def test_simulate_gives_the_same_bits_on_any_thread_count(capsys):
+    outs = []
+    for threads in ("1", "2"):
+        out = simulate_json(capsys, "--set", "sim.granules=512", "--precision", "0.5", "--threads", threads)
+        out.pop("wall_s")
+        outs.append(json.dumps(out, sort_keys=True))
+    assert outs[0] == outs[1]
