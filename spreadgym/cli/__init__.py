@@ -16,7 +16,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "reference": ("spreadgym.cli.reference",
                   "a converged pattern: independent runs of a scene pooled, CV and swath with standard errors"),
     "fit": ("spreadgym.cli.fit",
-            "fit scene keys (friction, restitution, granule size, drag) to a measured tray test, with 90-percent intervals"),
+            "fit scene keys (friction, restitution, granule size, drag) to a measured tray test, "
+            "with 90-percent intervals"),
     "study": ("spreadgym.cli.study",
               "rerun a published simulation study (paper: material, rpm, diameter; free vs locked rotation)"),
     "train": ("spreadgym.agents.commands.train",
