@@ -20,7 +20,7 @@ from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.departure import Departure, tilted_by_cone
 from spreadgym.physics.granules import GranuleBatch, sample_granules
 from spreadgym.physics.selection import SPINNER_MODELS
-from spreadgym.spread import estimate, pattern, rotations, twin
+from spreadgym.spread import discs, estimate, pattern, rotations, twin
 from spreadgym.spread import flight as flight_model
 from spreadgym.spread.metrics import RunMetrics
 
@@ -60,7 +60,7 @@ class ScenePlan:
     and contacts (None for a disc whose throw is the first disc's mirrored)."""
 
     scene: Scene
-    parts: list[twin.Disc]
+    parts: list[discs.Disc]
     chosen: str
     reason: str
     spins: list[Optional[tuple[GranuleBatch, Contacts]]]
@@ -73,12 +73,12 @@ class ScenePlan:
 
 def plan_scene(scene: Scene, model: str, library: MaterialLibrary, first_replicate: int = 0) -> ScenePlan:
     """The discs, model, granules (the replicates of sim.seed from `first_replicate`) and contacts of `scene`."""
-    parts = twin.discs(scene)
-    chosen, reason = twin.choose_for_discs(parts, model)
+    parts = discs.discs(scene)
+    chosen, reason = discs.choose_for_discs(parts, model)
     fertilizer = library.fertilizer(scene.fertilizer)
     spins: list[Optional[tuple[GranuleBatch, Contacts]]] = []
     for i, disc in enumerate(parts):
-        if i and twin.is_mirror_image(parts[0].scene, disc.scene):
+        if i and discs.is_mirror_image(parts[0].scene, disc.scene):
             spins.append(None)
         else:
             spins.append((sample_granules(disc.scene, fertilizer, scene.sim.replicates, first_replicate),
@@ -99,7 +99,7 @@ def run_scene(
 
     `progress(t)` is called with the simulated spinner time (s); `ci` adds the 95 %
     interval of the CV; `tracks` keeps that many granule paths for pictures. A twin
-    scene runs each disc on its own (spreadgym.spread.twin) and scores both discs'
+    scene runs each disc on its own (spreadgym.spread.discs) and scores both discs'
     landings as one pattern; the result's granule arrays hold the first disc's granules,
     then the second's, in the machine frame, and `metrics.departure` is the first disc's.
     spreadgym.spread.batch runs many scenes at once, with the same results.
@@ -116,26 +116,26 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
     """The rest of the chain after the spinner runs (`departures`, one per `plan.spinner_runs()`):
     cone, deflectors, release-angle copies, flight, trays and metrics (wall_s left 0)."""
     scene, parts, chosen, first_replicate = plan.scene, plan.parts, plan.chosen, plan.first_replicate
-    throws: list[twin.Throw] = []
+    throws: list[discs.Throw] = []
     turns: list[rotations.Turn] = []  # each disc's release-angle copies (spread.rotations)
     mirror = False  # the second disc's throw is the first's mirrored
     spun = iter(departures)
     for disc, spin in zip(parts, plan.spins):
         if spin is None:
-            throws.append(twin.mirrored(throws[0]))
+            throws.append(discs.mirrored(throws[0]))
             turns.append(turns[0])  # its copies are the first disc's mirrored (rotations.copied_sample)
             mirror = True
             continue
         granules, contacts = spin
         departure = tilted_by_cone(next(spun), np.radians(disc.scene.spinner.cone_deg))
         launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
-        throws.append(twin.Throw(granules, departure, launch))
+        throws.append(discs.Throw(granules, departure, launch))
         copies, copies_reason = rotations.copies_for(disc.scene, len(parts))
         turns.append(rotations.copy_turns(granules, disc.scene, copies, scene.sim.seed, first_replicate))
     # every disc flies in its own frame; the pattern is in the machine frame
-    local = twin.combined(throws)
-    placed = [twin.moved(t, d.centre_m) for t, d in zip(throws, parts)]
-    machine = twin.combined(placed)
+    local = discs.combined(throws)
+    placed = [discs.moved(t, d.centre_m) for t, d in zip(throws, parts)]
+    machine = discs.combined(placed)
     granules, departure, launch = machine.granules, machine.departure, machine.launch
     lost = twin.intercepted(placed, parts, mirror)  # thrown onto the other disc: not in the pattern
     flying = launch.departed & ~lost  # the granules that fly and land
@@ -205,7 +205,7 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
                             metrics)
 
 
-def _plate_sample(throw: twin.Throw, disc: Scene, contacts: Contacts, landing_m: np.ndarray,
+def _plate_sample(throw: discs.Throw, disc: Scene, contacts: Contacts, landing_m: np.ndarray,
                   turn: rotations.Turn) -> estimate.TraySample:
     """The tray sample of one disc's release-angle copies among plates: copies whose path
     clears the plates land as their granule's plate-free throw, turned (it flies once per
@@ -245,7 +245,7 @@ def _flight(launch: Departure, granules: GranuleBatch, flying: np.ndarray, disc_
         granules.diameter_m[flying][:flown], granules.density_kg_m3, flight,
         spin_rad_s=launch.spin_rad_s[flying][:flown],
     )
-    return landing if mirrored_after is None else twin.mirrored_landing(landing)
+    return landing if mirrored_after is None else discs.mirrored_landing(landing)
 
 
 def departure_summary(departure: Departure, omega_rad_s: float) -> dict:

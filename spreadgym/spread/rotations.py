@@ -55,8 +55,9 @@ from spreadgym.physics.geometry import advance_to_circle, zone_radius_m
 from spreadgym.physics.granules import GranuleBatch, pulled_back_by_clip
 from spreadgym.physics.stepped.pymunk_deflectors import near_plates
 from spreadgym.spread import von_mises
+from spreadgym.spread.discs import Disc, Throw
 from spreadgym.spread.estimate import TraySample
-from spreadgym.spread.twin import Disc, Throw, onto_disc_axis
+from spreadgym.spread.twin import onto_disc_axis
 
 COPY_STREAM = 1
 """Third word of the seed of the copies' angles (the sampler's uniforms use (seed, r))."""

@@ -19,7 +19,7 @@ from spreadgym.physics.compiled import granule_run
 from spreadgym.physics.compiled.model import kernel_inputs, run_kernel
 from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.granules import sample_granules
-from spreadgym.spread import twin
+from spreadgym.spread import discs
 from spreadgym.studies.references import reference_family
 
 SEEDS = range(4)
@@ -53,7 +53,7 @@ def outcomes_and_loops() -> dict:
     found = {}
     for name, scene in family.items():
         for seed in SEEDS:
-            disc = twin.discs(scene_with(scene, {"sim.seed": seed}))[0].scene
+            disc = discs.discs(scene_with(scene, {"sim.seed": seed}))[0].scene
             granules = sample_granules(disc, library.fertilizer(disc.fertilizer), disc.sim.replicates, 0)
             out, outcome, _ = run_kernel(kernel_inputs(disc, granules, resolve_contacts(disc, library)))
             found[f"{name}|{seed}|outcome"] = outcome

@@ -10,7 +10,7 @@ from scipy.special import i0e, i1e
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import load_scene, scene_with
 from spreadgym.physics.granules import rotate, sample_granules
-from spreadgym.spread import flight, rotations, twin
+from spreadgym.spread import discs, flight, rotations, twin
 from spreadgym.spread.pipeline import run_scene
 from spreadgym.spread.reference import pool_runs
 
@@ -127,7 +127,7 @@ def test_copies_land_where_flying_each_turned_copy_lands(settings):
 def test_each_copy_thrown_onto_the_other_disc_is_intercepted():
     scene = load_scene("twin-field", {"sim.granules": 1024, "sim.angle_copies": 4, "feed.angle_deg": 100.0})
     result = run_scene(scene, model="analytic")
-    first = twin.discs(scene)[0]
+    first = discs.discs(scene)[0]
     g = sample_granules(first.scene, LIBRARY.fertilizer(scene.fertilizer), scene.sim.replicates)
     turned = shifts(g, first.scene, 4, scene.sim.seed).ravel()
     half = result.granules.count // 2
@@ -217,7 +217,7 @@ def test_a_plate_copy_that_clears_the_plates_lands_as_its_granule_turned():
     gone = departure.departed
     for k in range(1, 4):  # copy k: the departure turned by s_k
         turned = rotate(departure.position_m, np.arctan2(s[k], c[k]))
-        moved = twin.Throw(g, dataclasses.replace(departure, position_m=turned,
+        moved = discs.Throw(g, dataclasses.replace(departure, position_m=turned,
                                                   velocity_m_s=rotate(departure.velocity_m_s,
                                                                       np.arctan2(s[k], c[k]))), departure)
         launch = SPINNER_MODELS["compiled"].deflect(moved.departure, scene, contacts, g)

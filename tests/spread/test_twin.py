@@ -10,7 +10,7 @@ from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.geometry import vane_segments
 from spreadgym.physics.granules import sample_granules
 from spreadgym.physics.selection import SPINNER_MODELS
-from spreadgym.spread import estimate, pattern, twin
+from spreadgym.spread import discs, estimate, pattern, twin
 from spreadgym.spread.pipeline import run_scene
 from spreadgym.spread.reference import pool_runs, reference_from
 
@@ -40,13 +40,13 @@ def test_twin_field_is_a_typical_field_machine():
     assert s.disc_centres_m == [(HALF, 0.0), (-HALF, 0.0)]
     second = s.second_disc()
     assert second[0].direction == "cw" and second[2].angle_deg == 180.0 - s.feed.angle_deg
-    assert twin.choose_for_discs(twin.discs(s), "auto")[0] == "compiled"  # inside the validated envelope
+    assert discs.choose_for_discs(discs.discs(s), "auto")[0] == "compiled"  # inside the validated envelope
 
 
 def test_mirror_of_a_disc_mirrors_its_vanes():
     s = _alone({"vanes.pitch_deg": [0.0, 20.0, -10.0, 5.0], "vanes.inner_radius_m": [0.05, 0.1, 0.15, 0.08]})
     inner, outer = vane_segments(s)
-    m_inner, m_outer = vane_segments(twin.mirror_scene(s))
+    m_inner, m_outer = vane_segments(discs.mirror_scene(s))
     # vane k of the mirror is vane N - k of the original, the mirror standing at spinner
     # angle pi (the phase of a mirrored granule is pi - phase): turned by pi it is x -> -x
     order = [0, 3, 2, 1]
@@ -68,9 +68,9 @@ def test_a_disc_run_on_mirrored_granules_is_the_mirrored_run(model):
     library = load_library()
     granules = sample_granules(s, library.fertilizer(s.fertilizer), s.sim.replicates)
     run = SPINNER_MODELS[model].run(s, granules, resolve_contacts(s, library))
-    first = twin.Throw(granules, run, run)
-    m = twin.mirror_scene(s)
-    flipped = twin.mirrored(first)
+    first = discs.Throw(granules, run, run)
+    m = discs.mirror_scene(s)
+    flipped = discs.mirrored(first)
     native = SPINNER_MODELS[model].run(m, flipped.granules, resolve_contacts(m, library))
     np.testing.assert_array_equal(native.outcome, run.outcome)
     gone = run.departed
