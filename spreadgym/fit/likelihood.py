@@ -34,6 +34,7 @@ from spreadgym.spread.batch import run_batch
 from spreadgym.spread.pipeline import SimulationResult
 
 SIGMA_BOUNDS = (1e-3, 3.0)  # catch noise s.d. of log mass: 0.1 % .. 300 %
+SOFT_WIDTH = 0.25  # landing spread, in trays (see soft_tray_masses)
 
 
 @dataclass(frozen=True)
@@ -82,14 +83,12 @@ class PatternModel:
 
     def prediction(self, result: SimulationResult) -> Prediction:
         """A run's pattern on the measured trays, with its Monte Carlo and counting variances."""
-        replicates = result.replicate_masses_kg
-        k, count = replicates.shape
-        index = self.local_index + count // 2
-        inside = (index >= 0) & (index < count)
-        per = np.zeros((k, self.trays))
-        per[:, inside] = replicates[:, index[inside]]
+        sample = result.sample
+        k = int(result.granules.replicate.max()) + 1
+        per = soft_tray_masses(sample.x_m, sample.mass_kg, sample.replicate, k, self.local_index,
+                               self.scene.pattern.tray_width_m)
         pooled = per.sum(axis=0)
-        floor = 0.5 * float(np.mean(result.sample.mass_kg)) if result.sample.mass_kg.size else 1e-12
+        floor = 0.5 * float(np.mean(sample.mass_kg)) if sample.mass_kg.size else 1e-12
         spread = k / (k - 1) * np.sum((per - pooled / k) ** 2, axis=0) if k > 1 else pooled ** 2
         mu = pooled + floor
         v_sim = (spread + floor ** 2) / mu ** 2
@@ -97,6 +96,28 @@ class PatternModel:
         granule_kg = float(np.sum(masses ** 2) / np.sum(masses))  # mass-weighted mean granule mass
         v_count = granule_kg / self.test.mass_kg[self.rows]
         return Prediction(np.log(mu), v_sim + v_count)
+
+
+def soft_tray_masses(x_m: np.ndarray, mass_kg: np.ndarray, replicate: np.ndarray, replicates: int,
+                     tray_index: np.ndarray, tray_width_m: float) -> np.ndarray:
+    """(K, n) mass of each replicate under trays i * w (i = `tray_index`), each landing spread
+    evenly over SOFT_WIDTH * w across the track, so a landing that moves with the
+    parameters passes its mass from tray to tray continuously instead of in one jump (the
+    fit's objective is then smooth at the scale of its steps; the blur changes a tray's
+    catch by about (SOFT_WIDTH w)^2 / 24 times the pattern's curvature)."""
+    h = SOFT_WIDTH * tray_width_m
+    left = (np.asarray(x_m) - 0.5 * h) / tray_width_m + 0.5  # tray i covers [i - 1/2, i + 1/2) w
+    first = np.floor(left).astype(np.int64)  # the tray of the landing's left end
+    share = np.minimum(1.0, (first + 1 - left) * tray_width_m / h)  # the part in that tray
+    lowest, span = int(tray_index.min()), int(tray_index.max() - tray_index.min()) + 1
+    rows = np.asarray(replicate, dtype=np.int64)
+    grid = np.zeros(replicates * span)
+    for offset, weight in ((0, share), (1, 1.0 - share)):
+        column = first + offset - lowest
+        kept = (column >= 0) & (column < span)
+        grid += np.bincount(rows[kept] * span + column[kept], weights=(mass_kg * weight)[kept],
+                            minlength=replicates * span)
+    return grid.reshape(replicates, span)[:, tray_index - lowest]
 
 
 def _key(unit: Sequence[float]) -> tuple:

@@ -16,6 +16,8 @@ from spreadgym.fit.space import FitSpace
 from spreadgym.fit.trays import TrayTest
 
 FIT_GRANULES = 4096  # granules per evaluation (x sim.angle_copies landing samples)
+RECENTRES = 1  # profiles redone at most once from a lower point they found
+RECENTRE_RISE = 0.1  # cost units: a lower point by less is the objective's granular jitter
 
 
 @dataclass
@@ -64,15 +66,19 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
                              f"needs at least {space.dims + 3}")
     objective, best = optimise.fit(pattern_model, seed)
     level = uncertainty.threshold(pattern_model.trays, space.dims)
-    info = uncertainty.information(objective, best)
-    low, high, points, open_ends, identifiable = [], [], [], [], {}
-    for j, key in enumerate(space.keys):
-        interval = uncertainty.profile_interval(objective, best, j, level, info)
-        low.append(interval.low)
-        high.append(interval.high)
-        points += [interval.low_point, interval.high_point]
-        open_ends.append((interval.low_open, interval.high_open))
-        identifiable[key] = bool(interval.high - interval.low <= uncertainty.IDENTIFIABLE_SHARE)
+    for _ in range(RECENTRES + 1):
+        info = uncertainty.information(objective, best)
+        intervals = [uncertainty.profile_interval(objective, best, j, level, info) for j in range(space.dims)]
+        lowest = min((i.lowest for i in intervals), key=lambda m: m.cost)
+        if lowest.cost >= best.cost - RECENTRE_RISE:
+            break
+        best = optimise.minimise(objective, [lowest.unit])  # a profile found a lower point: start again there
+    low = [i.low for i in intervals]
+    high = [i.high for i in intervals]
+    points = [p for i in intervals for p in (i.low_point, i.high_point)]
+    open_ends = [(i.low_open, i.high_open) for i in intervals]
+    identifiable = {key: bool(i.high - i.low <= uncertainty.IDENTIFIABLE_SHARE)
+                    for key, i in zip(space.keys, intervals)}
     direction, eigenvalue = uncertainty.weakest_direction(info)
     _, log_scale = residuals(pattern_model.log_mass, pattern_model.predict([best.unit])[0], objective.sigma)
     return FitResult(

@@ -42,6 +42,7 @@ class Interval:
     high_point: np.ndarray
     low_open: bool  # the profile stayed below the level up to the search bound
     high_open: bool
+    lowest: Minimum  # the lowest point the profile met (below the estimate: the fit stopped short)
 
 
 def threshold(trays: int, keys: int) -> float:
@@ -69,6 +70,10 @@ def profile_interval(objective: Objective, best: Minimum, j: int, level: float, 
         wald = 1.0
     if not np.isfinite(wald) or wald <= 0:
         wald = 1.0
+    # the valley's direction: how the other coordinates follow u_j at the Gauss-Newton optimum,
+    # so each profile point starts on the ridge, not across it (friction and restitution correlate ~0.8)
+    follow = -np.linalg.pinv(info[np.ix_(free, free)]) @ info[free, j]
+    lowest = best
     ends = []
     for sign in (-1.0, 1.0):
         step = float(np.clip(0.5 * wald, MIN_STEP, MAX_STEP))
@@ -78,7 +83,9 @@ def profile_interval(objective: Objective, best: Minimum, j: int, level: float, 
             t = float(np.clip(previous[j] + sign * step, 0.0, 1.0))
             start = previous.copy()
             start[j] = t
+            start[free] = np.clip(previous[free] + (t - previous[j]) * follow, 0.0, 1.0)
             here = _profile_point(objective, start, free)
+            lowest = here if here.cost < lowest.cost else lowest
             rise = max(here.cost - best.cost, 0.0)
             if rise >= level:
                 guess = _crossing(previous, previous_rise, here.unit, rise, level)
@@ -97,7 +104,7 @@ def profile_interval(objective: Objective, best: Minimum, j: int, level: float, 
             previous, previous_rise = here.unit, rise
         ends.append(end if end is not None else (previous, True))
     (low_point, low_open), (high_point, high_open) = ends
-    return Interval(float(low_point[j]), float(high_point[j]), low_point, high_point, low_open, high_open)
+    return Interval(float(low_point[j]), float(high_point[j]), low_point, high_point, low_open, high_open, lowest)
 
 
 def _profile_point(objective: Objective, start: np.ndarray, free: np.ndarray) -> Minimum:
