@@ -12,8 +12,9 @@ out during the pass is rarely known), so the scale is free. Per tray i with a ca
 * a: the log scale, profiled out (weighted mean of the residuals);
 * sigma: the multiplicative catch noise (tray placement, losses, weighing), unknown,
   estimated from the residuals;
-* v_sim,i: the relative variance of mu_i from the simulation's independent replicates
-  (its Monte Carlo error, fixed across theta by common random numbers: sim.seed fixed);
+* v_sim,i: the relative variance of mu_i, its Monte Carlo error (fixed across theta by
+  common random numbers: sim.seed fixed), c / mu_i with c pooled over the trays from the
+  simulation's independent replicates;
 * v_count,i = m_g / m_i: the counting noise of a tray holding m_i / m_g granules
   (m_g the mass-weighted mean granule mass of the scene's fertilizer).
 Trays that caught nothing carry no log-shape and are left out of the sum.
@@ -43,6 +44,14 @@ class Prediction:
 
     log_mu: np.ndarray  # (n,) log simulated mass, kg (floored)
     variance: np.ndarray  # (n,) v_sim + v_count, relative (log scale)
+    replicate_kg: np.ndarray  # (K, n) each independent replicate's share of the simulated mass
+    floor_kg: float  # added to every tray's mass (half a landing sample)
+
+    def leave_out(self, k: int) -> "Prediction":
+        """The prediction from every replicate but `k` (rescaled to all K), same variances."""
+        count = self.replicate_kg.shape[0]
+        kept = (self.replicate_kg.sum(axis=0) - self.replicate_kg[k]) * count / (count - 1)
+        return Prediction(np.log(kept + self.floor_kg), self.variance, self.replicate_kg, self.floor_kg)
 
 
 class PatternModel:
@@ -89,13 +98,17 @@ class PatternModel:
                                self.scene.pattern.tray_width_m)
         pooled = per.sum(axis=0)
         floor = 0.5 * float(np.mean(sample.mass_kg)) if sample.mass_kg.size else 1e-12
+        # Monte Carlo variance of a tray's mass, proportional to the mass (as for a count), the
+        # factor pooled over the trays: one tray's own estimate from K - 1 = 7 degrees of freedom
+        # is too rough to weigh it by (its inverse is 40 % too large on average)
         spread = k / (k - 1) * np.sum((per - pooled / k) ** 2, axis=0) if k > 1 else pooled ** 2
+        per_kg = float(spread.sum() / pooled.sum()) if pooled.sum() > 0 else floor
         mu = pooled + floor
-        v_sim = (spread + floor ** 2) / mu ** 2
+        v_sim = (per_kg * mu + floor ** 2) / mu ** 2
         masses = result.granules.mass_kg
         granule_kg = float(np.sum(masses ** 2) / np.sum(masses))  # mass-weighted mean granule mass
         v_count = granule_kg / self.test.mass_kg[self.rows]
-        return Prediction(np.log(mu), v_sim + v_count)
+        return Prediction(np.log(mu), v_sim + v_count, per, floor)
 
 
 def soft_tray_masses(x_m: np.ndarray, mass_kg: np.ndarray, replicate: np.ndarray, replicates: int,

@@ -16,6 +16,7 @@ from spreadgym.fit.space import FitSpace
 from spreadgym.fit.trays import TrayTest
 
 FIT_GRANULES = 4096  # granules per evaluation (x sim.angle_copies landing samples)
+FIT_REPLICATES = 16  # independent replicates per evaluation: the jackknife of the simulation's error (15 d.o.f.)
 RECENTRES = 1  # profiles redone at most once from a lower point they found
 RECENTRE_RISE = 0.1  # cost units: a lower point by less is the objective's granular jitter
 
@@ -59,7 +60,8 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
     scene's) and the scene's sim.seed for every point (common random numbers); `seed` draws
     the Sobol start design."""
     started = time.perf_counter()
-    evaluation = scene if granules is None else scene_with(scene, {"sim.granules": granules})
+    evaluation = scene_with(scene, {"sim.replicates": FIT_REPLICATES, **({} if granules is None else
+                                                                         {"sim.granules": granules})})
     pattern_model = PatternModel(evaluation, space, test, model)
     if pattern_model.trays < space.dims + 3:
         raise SpreadgymError(f"--trays: {pattern_model.trays} trays caught anything; fitting {space.dims} key(s) "
@@ -67,18 +69,21 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
     objective, best = optimise.fit(pattern_model, seed)
     level = uncertainty.threshold(pattern_model.trays, space.dims)
     for _ in range(RECENTRES + 1):
-        info = uncertainty.information(objective, best)
+        jac = uncertainty.jacobian(objective, best)
+        info = jac.T @ jac
         intervals = [uncertainty.profile_interval(objective, best, j, level, info) for j in range(space.dims)]
         lowest = min((i.lowest for i in intervals), key=lambda m: m.cost)
         if lowest.cost >= best.cost - RECENTRE_RISE:
             break
         best = optimise.minimise(objective, [lowest.unit])  # a profile found a lower point: start again there
-    low = [i.low for i in intervals]
-    high = [i.high for i in intervals]
+    sim_sd = uncertainty.simulation_sd(objective, best, jac)
+    replicates = pattern_model.predict([best.unit])[0].replicate_kg.shape[0]
+    low, high = zip(*(uncertainty.widened(best.unit[j], i.low, i.high, sim_sd[j], replicates)
+                      for j, i in enumerate(intervals)))
     points = [p for i in intervals for p in (i.low_point, i.high_point)]
-    open_ends = [(i.low_open, i.high_open) for i in intervals]
-    identifiable = {key: bool(i.high - i.low <= uncertainty.IDENTIFIABLE_SHARE)
-                    for key, i in zip(space.keys, intervals)}
+    open_ends = [(bool(i.low_open or lo == 0.0), bool(i.high_open or hi == 1.0))
+                 for i, lo, hi in zip(intervals, low, high)]
+    identifiable = {key: bool(hi - lo <= uncertainty.IDENTIFIABLE_SHARE) for key, lo, hi in zip(space.keys, low, high)}
     direction, eigenvalue = uncertainty.weakest_direction(info)
     _, log_scale = residuals(pattern_model.log_mass, pattern_model.predict([best.unit])[0], objective.sigma)
     return FitResult(

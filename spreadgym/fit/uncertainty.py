@@ -7,7 +7,10 @@ nonlinear regression: { t : S_j(t) - S_min <= F(1, n - p; 0.9) n / (n - p) } (ex
 a linear model with Gaussian noise; the factor n / (n - p) undoes the maximum-likelihood
 sigma's shrinkage). The profile is walked out from the estimate on both sides until it
 crosses that level or meets the search bound; the crossing is interpolated on the
-signed root of S_j - S_min, which a near-linear model makes linear.
+signed root of S_j - S_min, which a near-linear model makes linear. The simulation's own
+Monte Carlo error, the same at every point under common random numbers, is added in
+quadrature (`simulation_sd`): on the field scene at 4096 granules it is as large as the
+catch noise's part, and without it 18 of 30 one-key intervals held the truth.
 
 A key is identifiable when its interval covers at most IDENTIFIABLE_SHARE of its search
 range. Trade-offs come from the Gauss-Newton information J'J at the estimate: the
@@ -21,7 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.stats import f as f_distribution
+from scipy.stats import t as t_distribution
 
+from spreadgym.fit.likelihood import residuals
 from spreadgym.fit.optimise import Minimum, Objective, central_jacobian, minimise
 
 LEVEL = 0.90
@@ -53,10 +58,37 @@ def threshold(trays: int, keys: int) -> float:
     return float(f_distribution.ppf(LEVEL, 1, dof) * trays / dof)
 
 
-def information(objective: Objective, best: Minimum) -> np.ndarray:
-    """Gauss-Newton information J'J (unit cube) of the standardised residuals at the estimate."""
-    jac = central_jacobian(objective, best.unit, step=INFORMATION_STEP)
-    return jac.T @ jac
+def jacobian(objective: Objective, best: Minimum) -> np.ndarray:
+    """d standardised residuals / d u at the estimate; J'J is the Gauss-Newton information."""
+    return central_jacobian(objective, best.unit, step=INFORMATION_STEP)
+
+
+def simulation_sd(objective: Objective, best: Minimum, jac: np.ndarray) -> np.ndarray:
+    """(d,) unit-cube s.d. of the estimate from the simulation's own Monte Carlo error.
+
+    Common random numbers fix one sample of granules for every point, so its error is
+    the same everywhere, and part of it looks like a parameter change (a sample whose
+    granules run a little fast stretches the pattern as a lower restitution would). The
+    delete-one-replicate jackknife over the K independent replicates measures it: each
+    replicate left out moves the Gauss-Newton estimate by -(J'J)^+ J' dr_k."""
+    model, sigma = objective.model, objective.sigma
+    prediction = model.predict([best.unit])[0]
+    base, _ = residuals(model.log_mass, prediction, sigma)
+    step = np.linalg.pinv(jac.T @ jac) @ jac.T
+    k = prediction.replicate_kg.shape[0]
+    if k < 2:
+        return np.zeros(best.unit.size)
+    moves = np.array([-step @ (residuals(model.log_mass, prediction.leave_out(i), sigma)[0] - base)
+                      for i in range(k)])
+    return np.sqrt((k - 1) / k * np.sum((moves - moves.mean(axis=0)) ** 2, axis=0))
+
+
+def widened(estimate: float, low: float, high: float, sim_sd: float, replicates: int) -> tuple[float, float]:
+    """The profile interval's two half-widths combined in quadrature with the simulation's
+    Monte Carlo part (Student t, K - 1 degrees of freedom for the jackknife), clipped to the cube."""
+    q = float(t_distribution.ppf(0.5 + LEVEL / 2, max(replicates - 1, 1))) * sim_sd
+    return (max(0.0, estimate - float(np.hypot(estimate - low, q))),
+            min(1.0, estimate + float(np.hypot(high - estimate, q))))
 
 
 def profile_interval(objective: Objective, best: Minimum, j: int, level: float, info: np.ndarray) -> Interval:
