@@ -21,3 +21,12 @@ def prepare(library):
         return granules, resolve_contacts(scene, library)
 
     return _prepare
+
+
+@pytest.fixture(autouse=True)
+def _default_thread_count():
+    """A command run in a test (`--threads N`) sets the process's thread count: put it back."""
+    yield
+    from spreadgym.threads import set_threads
+
+    set_threads(None)
