@@ -34,7 +34,7 @@ def write_csv(rows: list[dict], path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from spreadgym.agents.chart import scale
+    from spreadgym.agents.chart import quality, scale
     from spreadgym.errors import SpreadgymError
     from spreadgym.studies import (
         benchmarks,
@@ -74,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
         "startup": lambda: startup.startup_rows(repeats=args.repeats),
         "precision": lambda: precision_rows(estimate_bench, args.out, say),
         "env-noise": lambda: env_reward_noise(),
+        "chart-quality": lambda: quality.chart_quality_rows(progress=say),
         "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
     }
     plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy,
