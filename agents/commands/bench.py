@@ -40,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
         benchmarks,
         estimate_bench,
         fidelity,
+        fit_bench,
         magnus,
         references,
         speed_accuracy,
@@ -75,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
         "precision": lambda: precision_rows(estimate_bench, args.out, say),
         "env-noise": lambda: env_reward_noise(),
         "chart-quality": lambda: quality.chart_quality_rows(progress=say),
+        "fit": lambda: fit_bench.fit_bench_rows(args.out, tests=40, workers=max(1, len(os.sched_getaffinity(0)) // 2),
+                                                progress=say),
         "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
     }
     plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy,
