@@ -131,6 +131,11 @@ def target_rows(references_dir: Path, model: str = "pymunk", seeds: int = 10, na
     return rows
 
 
+def mark(ok: bool) -> str:
+    """A target's cell in a markdown table."""
+    return "yes" if ok else "**no**"
+
+
 TARGET_BIAS_PP = 0.3  # issue targets: |mean - converged| and s.d. over seeds, pp
 TARGET_SD_PP = 0.3
 TARGET_SWATH_SHARE = 0.9
@@ -138,9 +143,6 @@ TARGET_SWATH_SHARE = 0.9
 
 def targets_markdown(rows: list[dict]) -> str:
     """The target table: one line per scene and model, each target marked met or not."""
-    def mark(ok: bool) -> str:
-        return "yes" if ok else "**no**"
-
     lines = ["| scene | model | converged CV (%) | mean of one run (%) | bias (pp, ± SE) | bias ok | "
              "s.d. (pp) | s.d. ok | swath equal (of seeds) | wall (ms, median) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
@@ -199,9 +201,6 @@ def precision_rows(references_dir: Path, seeds: int = 8, names=PRECISION_SCENES,
 
 def precision_markdown(rows: list[dict]) -> str:
     """The precision targets, one line per scene, each marked met or not."""
-    def mark(ok: bool) -> str:
-        return "yes" if ok else "**no**"
-
     lines = ["| scene | converged CV (%) | mean (%) | bias (pp) | s.d. over seeds (pp) | stated SE, RMS / max (pp) | "
              "stated / observed | swath equal | runs (median) | wall (s, median) | targets met |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
