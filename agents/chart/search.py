@@ -52,6 +52,7 @@ from spreadgym.config.scene import scene_with
 from spreadgym.spread.batch import run_batch
 from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.reference import pool_runs, reference_from
+from spreadgym.threads import thread_count
 
 SWATH_PENALTY_PERCENT = 100.0  # percentage points per unit relative swath shortfall
 LOST_MASS_PENALTY_PERCENT = 100.0  # percentage points per unit share of mass not in the trays
@@ -224,7 +225,7 @@ def run_cell(spec: ChartSpec, cell: Cell, previous: Optional[dict] = None) -> di
         "verification": {"model": pooled.model, "granules": pooled.granules, "replicates": pooled.replicates,
                          "cv_raw_percent": reference.at_target.raw_percent,
                          "effective_swath_interval_m": list(reference.effective_swath_interval_m),
-                         "wall_s": pooled.wall_s},
+                         "wall_s": pooled.wall_s, "threads": thread_count()},
         "verification_p90": p90,
         "trays": {"center_m": reference.trays.center_m.tolist(), "mass_kg": reference.trays.mass_kg.tolist()},
         "cv_curve": {"bout_width_m": reference.widths_m.tolist(),

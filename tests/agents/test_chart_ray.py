@@ -33,6 +33,8 @@ def test_cli_end_to_end_on_an_embedded_two_cpu_ray(tmp_path):
     assert [(r["fertilizer"], r["width_m"]) for r in payload["rows"]] == [
         ("compound-10-16-10", 3.0), ("compound-10-16-10", 4.0), ("pellet", 3.0), ("pellet", 4.0)]
     assert all(c["verification"]["model"] == "pymunk" for c in payload["cells"])
+    # two levels never multiply: each of the 2 Ray workers' batches ran on its task's CPU alone
+    assert all(c["verification"]["threads"] == 1 for c in payload["cells"])
     assert all(r["cv_percent"] is not None for r in payload["rows"])
     assert {p.name for p in out.iterdir()} >= {"chart.csv", "chart.json", "chart.md", "chart.png", "chart.html",
                                                "manifest.json"}
