@@ -171,13 +171,12 @@ def test_a_cancelled_chart_job_leaves_the_server_working(client, charts_dir):
     bad = client.post("/api/chart-jobs", json={"scene": "paper", "fertilizers": "pellet", "widths": "3",
                                                "out": "../job"})
     assert bad.status_code == 422 and "--out" in bad.json()["error"]
-    # two rows: a row's cells run in width order in one task (steady rows), so the job is
-    # cancelled while the second row runs, after the first is done
-    job = {"scene": "paper", "fertilizers": "pellet,compound-10-16-10", "widths": "3,3.5", "out": "job",
+    # enough cells (a second each on an idle machine) that the cancel lands while they run
+    job = {"scene": "paper", "fertilizers": "pellet,compound-10-16-10", "widths": "3:6:0.5", "out": "job",
            "budget": 5, "granules": 128, "workers": 1}
     started = client.post("/api/chart-jobs", json=job)
     assert started.status_code == 200, started.text
-    assert started.json()["state"] == "running" and started.json()["total"] == 4
+    assert started.json()["state"] == "running" and started.json()["total"] == 14
     assert client.post("/api/chart-jobs", json=job).status_code == 422  # one at a time
     deadline = time.monotonic() + 180
     while client.get("/api/chart-jobs").json()["done"] < 1 and time.monotonic() < deadline:
