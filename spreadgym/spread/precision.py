@@ -133,17 +133,20 @@ class PreciseEstimate:
     runs: int
     precision_pp: float  # what was asked
     max_runs: int
-    masses: np.ndarray  # (runs R, T) replicate tray masses
-    trays: pattern.Trays  # the pooled single pass
-    at_target: estimate.CvEstimate
-    widths_m: np.ndarray
-    cv_percent: np.ndarray
-    effective_swath_m: float
-    released_kg: float
+    reference: Reference  # the pooled pattern's figures (reference.reference_from)
     retained_kg: float
     intercepted_kg: float
     outcomes: dict[str, int]
     wall_s: float
+
+    @property
+    def masses(self) -> np.ndarray:
+        """(runs R, T) replicate tray masses."""
+        return self.reference.pooled.pooled.masses()
+
+    @property
+    def at_target(self) -> estimate.CvEstimate:
+        return self.reference.at_target
 
     @property
     def granules_simulated(self) -> int:
@@ -162,15 +165,16 @@ class PreciseEstimate:
         if not self.precision_met and self.at_target.standard_error_percent is not None:
             notes.append(f"standard error {self.at_target.standard_error_percent:.2g} pp after the cap of "
                          f"{self.max_runs} runs: above the {self.precision_pp:g} pp asked")
-        interval = self.at_target.interval_percent
+        ref = self.reference
+        interval = ref.at_target.interval_percent
         metrics = replace(
-            m, outcomes=self.outcomes, cv_percent_at_target=self.at_target.cv_percent,
-            cv_standard_error_percent=self.at_target.standard_error_percent, cv_raw_percent=self.at_target.raw_percent,
-            cv_ci_percent=None if interval is None else list(interval), effective_swath_m=self.effective_swath_m,
-            curve_bout_width_m=self.widths_m, curve_cv_percent=self.cv_percent, trays=self.trays,
-            released_kg=self.released_kg, retained_kg=self.retained_kg, intercepted_kg=self.intercepted_kg,
+            m, outcomes=self.outcomes, cv_percent_at_target=ref.at_target.cv_percent,
+            cv_standard_error_percent=ref.at_target.standard_error_percent, cv_raw_percent=ref.at_target.raw_percent,
+            cv_ci_percent=None if interval is None else list(interval), effective_swath_m=ref.effective_swath_m,
+            curve_bout_width_m=ref.widths_m, curve_cv_percent=ref.cv_percent, trays=ref.trays,
+            released_kg=ref.pooled.released_kg, retained_kg=self.retained_kg, intercepted_kg=self.intercepted_kg,
             notes=notes, wall_s=self.wall_s)
-        return replace(self.first, trays=self.trays, replicate_masses_kg=self.masses, metrics=metrics)
+        return replace(self.first, trays=ref.trays, replicate_masses_kg=self.masses, metrics=metrics)
 
     def to_json(self) -> dict:
         """`spreadgym simulate --json`: a run's keys with the pooled pattern's figures, plus
@@ -196,8 +200,10 @@ class _Pool:
 
 def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, library: Optional[MaterialLibrary],
                tracks: int, progress: Optional[Callable[[int, int], None]],
-               pilot_runs: int = PILOT_RUNS) -> tuple[_Pool, PooledMasses]:
-    """Runs 0, 1, ... of `scene` (consecutive replicates) pooled by the rule of this module."""
+               pilot_runs: int = PILOT_RUNS) -> tuple[_Pool, Reference]:
+    """Runs 0, 1, ... of `scene` (consecutive replicates) pooled by the rule of this module,
+    and the pooled pattern's figures."""
+    started = time.perf_counter()
     check_precision(precision_pp)
     library = library or load_library()
     p = scene.pattern
@@ -235,7 +241,10 @@ def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, lib
         return estimate.estimate_cv(masses.masses(), p.tray_width_m, p.target_swath_m, p.driving).standard_error_percent
 
     pool_until_precise(add_runs, precision_pp, max_runs, pilot_runs)
-    return pool, masses
+    m = pool.first.metrics
+    summary = PooledRuns(masses, masses.masses().shape[0], pool.runs * m.granules, pool.landed, m.angle_copies,
+                         pool.released_kg, m.model, m.model_reason, time.perf_counter() - started)
+    return pool, reference_from(scene, summary)
 
 
 def simulate_precisely(scene: Scene, precision_pp: float = SIMULATE_PRECISION_PP, max_runs: int = SIMULATE_MAX_RUNS,
@@ -244,17 +253,9 @@ def simulate_precisely(scene: Scene, precision_pp: float = SIMULATE_PRECISION_PP
     """Runs of `scene` pooled until the CV at the target has standard error `precision_pp`
     (percentage points), at most `max_runs` runs; `progress(runs, cap)` after each."""
     started = time.perf_counter()
-    pool, pooled = _pool_runs(scene, precision_pp, max_runs, model, library, tracks, progress)
-    p = scene.pattern
-    masses, trays = pooled.masses(), pooled.trays()
-    at_target = estimate.estimate_cv(masses, p.tray_width_m, p.target_swath_m, p.driving)
-    has_mass = trays.total_kg > 0.0
-    widths = pattern.default_widths_m(trays) if has_mass else np.zeros(0)
-    cvs, _ = estimate.cv_curve(masses, p.tray_width_m, p.driving, widths)
-    swath = pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent) if has_mass else 0.0
-    return PreciseEstimate(pool.first, pool.runs, precision_pp, max_runs, masses, trays, at_target, widths, cvs,
-                           swath, pool.released_kg, pool.retained_kg, pool.intercepted_kg, pool.outcomes,
-                           time.perf_counter() - started)
+    pool, reference = _pool_runs(scene, precision_pp, max_runs, model, library, tracks, progress)
+    return PreciseEstimate(pool.first, pool.runs, precision_pp, max_runs, reference, pool.retained_kg,
+                           pool.intercepted_kg, pool.outcomes, time.perf_counter() - started)
 
 
 def reference_precisely(scene: Scene, precision_pp: float = REFERENCE_PRECISION_PP,
@@ -263,11 +264,6 @@ def reference_precisely(scene: Scene, precision_pp: float = REFERENCE_PRECISION_
                         progress: Optional[Callable[[int, int], None]] = None, runs: Optional[int] = None) -> Reference:
     """`spreadgym reference`: the converged pattern of runs pooled by this module's rule (at
     least MIN_RUNS; exactly `runs` where given), as `reference.reference_from` reports it."""
-    started = time.perf_counter()
     cap = runs if runs is not None else max(max_runs, MIN_RUNS)
-    pool, pooled = _pool_runs(scene, precision_pp, cap, model, library, 0, progress,
-                              pilot_runs=runs if runs is not None else PILOT_RUNS)
-    m = pool.first.metrics
-    summary = PooledRuns(pooled, pooled.masses().shape[0], pool.runs * m.granules, pool.landed, m.angle_copies,
-                         pool.released_kg, m.model, m.model_reason, time.perf_counter() - started)
-    return reference_from(scene, summary)
+    return _pool_runs(scene, precision_pp, cap, model, library, 0, progress,
+                      pilot_runs=runs if runs is not None else PILOT_RUNS)[1]

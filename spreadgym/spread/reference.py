@@ -131,7 +131,7 @@ def reference_from(scene: Scene, pooled: PooledLandings) -> Reference:
     """The pattern estimate of pooled landings, on the scene's trays and threshold."""
     p = scene.pattern
     trays, masses = pooled.replicate_masses(p.tray_width_m, p.target_swath_m)
-    widths = pattern.default_widths_m(trays)
+    widths = pattern.default_widths_m(trays) if trays.total_kg > 0.0 else np.zeros(0)  # nothing landed: no curve
     cvs, ses = estimate.cv_curve(masses, p.tray_width_m, p.driving, widths)
     swath = pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent)
     band = SE_MULTIPLE_FOR_SWATH * np.nan_to_num(ses)
