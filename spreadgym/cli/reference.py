@@ -14,7 +14,7 @@ from spreadgym.config.scene import load_scene
 from spreadgym.errors import ConfigError, SpreadgymError
 from spreadgym.physics.selection import MODELS
 from spreadgym.report import format_table, print_json, with_error
-from spreadgym.spread.precision import REFERENCE_MAX_RUNS, REFERENCE_PRECISION_PP, reference_precisely
+from spreadgym.spread.precision import REFERENCE_MAX_RUNS, REFERENCE_PRECISION_PP, reached, reference_precisely
 from spreadgym.spread.reference import MIN_RUNS
 from spreadgym.threads import set_threads
 
@@ -58,11 +58,11 @@ def run(args: argparse.Namespace) -> int:
         reference = reference_precisely(scene, args.precision, args.max_runs, model=args.model,
                                         progress=lambda done, _cap: bar.update(done - bar.n), runs=args.replicates)
     payload = reference.to_json()
-    se = payload["cv_standard_error_percent"]
     payload.update({"granules_simulated": reference.pooled.granules,
                     "runs": reference.pooled.granules // scene.sim.granules,
                     "precision_percent": None if args.replicates else args.precision,
-                    "precision_met": None if args.replicates else se is not None and se <= args.precision})
+                    "precision_met": None if args.replicates else reached(payload["cv_standard_error_percent"],
+                                                                           args.precision)})
     if args.json:
         print_json(payload)
     else:

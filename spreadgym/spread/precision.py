@@ -52,6 +52,11 @@ def check_precision(value: float, flag: str = "--precision") -> float:
     return float(value)
 
 
+def reached(standard_error_pp: Optional[float], precision_pp: float) -> bool:
+    """Whether a stated standard error (None: unknown) is within the precision asked."""
+    return standard_error_pp is not None and standard_error_pp <= precision_pp
+
+
 def runs_needed(standard_error_pp: Optional[float], runs: int, precision_pp: float, max_runs: int) -> int:
     """Runs to make in all so that the standard error, now `standard_error_pp` after `runs`
     runs, falls to `precision_pp` (it falls as 1/sqrt(runs)); `runs` where it already has
@@ -155,8 +160,7 @@ class PreciseEstimate:
 
     @property
     def precision_met(self) -> bool:
-        se = self.at_target.standard_error_percent
-        return se is not None and se <= self.precision_pp
+        return reached(self.at_target.standard_error_percent, self.precision_pp)
 
     def as_result(self) -> SimulationResult:
         """Run 0 (granules, paths, landings for pictures) carrying the pooled trays and figures."""
