@@ -106,11 +106,9 @@ def replicate_tray_masses(x_m: np.ndarray, mass_kg: np.ndarray, replicate: np.nd
     """The pooled `Trays` and the (K, T) tray masses of each replicate on the same row.
 
     `replicate` (N,) gives each granule's replicate index in 0..replicates-1."""
-    trays, index = pattern.collect_indexed(x_m, mass_kg, tray_width_m, min_half_width_m=min_half_width_m)
-    flat = np.asarray(replicate, dtype=np.int64) * trays.count + index
-    weights = np.broadcast_to(np.asarray(mass_kg, dtype=float), index.shape)
-    per_replicate = np.bincount(flat, weights=weights, minlength=replicates * trays.count)
-    return trays, per_replicate.reshape(replicates, trays.count)
+    trays, per_replicate, _ = pattern.collect_replicates(x_m, mass_kg, replicate, replicates, tray_width_m,
+                                                         min_half_width_m)
+    return trays, per_replicate
 
 
 def cv_curve(replicate_masses: np.ndarray, tray_width_m: float, driving: str,

@@ -44,6 +44,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from spreadgym.errors import ConfigError
+from spreadgym.spread import binning
 
 DRIVING = ("racetrack", "back-and-forth")
 _GRID_TOL = 1e-9
@@ -133,11 +134,6 @@ def bout_tray_count(bout_width_m: float, tray_width_m: float) -> int:
     return n
 
 
-def _tray_index(x_m: np.ndarray, w: float) -> np.ndarray:
-    """Index i of the tray [i w - w/2, i w + w/2) holding each x."""
-    return np.floor(x_m / w + 0.5).astype(np.int64)
-
-
 def collect(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) -> Trays:
     """Catch granules landing at x_m (across the track) with masses mass_kg.
 
@@ -148,26 +144,39 @@ def collect(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) ->
 
 def collect_indexed(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) -> tuple[Trays, np.ndarray]:
     """`collect`, and the index of each granule's tray (0 .. count - 1, from the row's left end)."""
+    x = np.asarray(x_m, dtype=float).reshape(-1)
+    trays, _, index = collect_replicates(x, mass_kg, np.zeros(x.size, dtype=np.int64), 1, tray_width_m,
+                                         min_half_width_m)
+    return trays, index
+
+
+def collect_replicates(x_m, mass_kg, replicate, replicates: int, tray_width_m: float,
+                       min_half_width_m: float = 0.0) -> tuple[Trays, np.ndarray, np.ndarray]:
+    """`collect` of granules in `replicates` independent replicates (`replicate` (N,),
+    0..replicates-1 each): the pooled `Trays`, the (replicates, T) tray masses of each
+    replicate on the same row, and each granule's tray (0 .. T - 1). One compiled pass
+    (spreadgym.spread.binning); the sums are bincount's."""
     w = _check_tray_width(tray_width_m)
     x = np.asarray(x_m, dtype=float).reshape(-1)
     mass = np.broadcast_to(np.asarray(mass_kg, dtype=float), x.shape)
-    if not np.all(np.isfinite(x)):
-        raise ConfigError("x_m", "landing positions must be finite")
-    if not np.all(np.isfinite(mass)) or np.any(mass < 0):
-        raise ConfigError("mass_kg", "granule masses must be finite and >= 0")
     half = float(min_half_width_m)
     if not (np.isfinite(half) and half >= 0):
         raise ConfigError("min_half_width_m", f"must be >= 0, got {min_half_width_m!r}")
-    idx = _tray_index(x, w)
-    m = int(np.max(np.abs(idx))) if idx.size else 0
-    m = max(m, int(np.ceil(half / w - 0.5 - _GRID_TOL)))
-    count = 2 * m + 1
-    if count > MAX_TRAYS:
+    status, m, pooled, per_replicate, index = binning.bin_landings(
+        x, mass, np.asarray(replicate, dtype=np.int64).reshape(-1), int(replicates), w,
+        max(0, int(np.ceil(half / w - 0.5 - _GRID_TOL))), MAX_TRAYS)
+    if status == binning.BAD_POSITION:
+        raise ConfigError("x_m", "landing positions must be finite")
+    if status == binning.BAD_MASS:
+        raise ConfigError("mass_kg", "granule masses must be finite and >= 0")
+    if status == binning.BAD_REPLICATE:
+        raise ConfigError("replicate", f"replicate indices must be in 0..{int(replicates) - 1}")
+    if status == binning.TOO_WIDE:
+        reach = float(np.max(np.abs(x))) / w + 0.5
+        count = 2 * int(max(reach, m)) + 1
         raise ConfigError("pattern.tray_width_m", f"the pattern spans {count * w:.0f} m, {count} trays of {w:g} m; "
                                                   f"allowed up to {MAX_TRAYS} trays (use wider trays)")
-    tray = idx + m
-    masses = np.bincount(tray, weights=mass, minlength=count)
-    return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=masses, width_m=w), tray
+    return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=pooled, width_m=w), per_replicate, index
 
 
 def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.ndarray, np.ndarray]:

@@ -49,6 +49,7 @@ from typing import Sequence
 import numpy as np
 
 from spreadgym.config.scene import Deflector, Flight, Scene
+from spreadgym.physics.compiled.layout import KERNEL
 from spreadgym.physics.constants import GRAVITY_M_S2
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.geometry import advance_to_circle, zone_radius_m
@@ -148,28 +149,51 @@ def copied_sample(throws: list[Throw], landings_m: list[np.ndarray], turns: list
             lost_kg.append(lost_kg[0])
             continue
         g, launch = throw.granules, throw.launch
-        row = None if launch.departed.all() else np.flatnonzero(np.tile(launch.departed, turn.copies))
-        c, s = (turn.cos, turn.sin) if row is None else (turn.cos[row], turn.sin[row])
-
-        def of_copies(a: np.ndarray, row=row, copies=turn.copies) -> np.ndarray:
-            """Per departed copy, copy-major: whole tiles when every granule departed (the usual case)."""
-            return np.tile(a, (copies,) + (1,) * (a.ndim - 1)) if row is None else a[row % a.shape[0]]
-        mass = of_copies(g.mass_kg) / turn.copies
-        local_x = c * of_copies(landed_at[:, 0]) - s * of_copies(landed_at[:, 1])
-        replicate = of_copies(g.replicate)
+        copies = turn.copies
+        every = bool(launch.departed.all())  # the usual case: every copy, in order
+        # copy-major: copy k of granule j is k N + j
+        departed_copies = np.zeros(0, dtype=np.int64) if every else np.flatnonzero(np.tile(launch.departed, copies))
+        size = copies * g.count if every else departed_copies.size
+        local_x, mass, replicate = np.empty(size), np.empty(size), np.empty(size, dtype=g.replicate.dtype)
+        turned_copies(every, departed_copies, turn.cos, turn.sin, landed_at[:, 0], landed_at[:, 1], g.mass_kg,
+                      g.replicate, copies, local_x, mass, replicate)
         lost = 0.0  # one disc: every copy is kept
         if len(parts) > 1:
+            if every:
+                departed_copies = np.arange(size)
+            c, s, granule = turn.cos[departed_copies], turn.sin[departed_copies], departed_copies % g.count
             other = np.subtract(parts[1 - i].centre_m, disc.centre_m)  # the other axis, this disc's frame
             axis = np.column_stack([c * other[0] + s * other[1], c * other[1] - s * other[0]])
-            kept = ~onto_disc_axis(of_copies(launch.position_m), of_copies(launch.velocity_m_s),
-                                   of_copies(g.radius_m), axis, parts[1 - i].scene.spinner.radius_m)
+            kept = ~onto_disc_axis(launch.position_m[granule], launch.velocity_m_s[granule], g.radius_m[granule],
+                                   axis, parts[1 - i].scene.spinner.radius_m)
             lost = float(mass[~kept].sum())
             local_x, mass, replicate = local_x[kept], mass[kept], replicate[kept]
         xs.append(local_x + disc.centre_m[0])
         masses.append(mass)
         replicates.append(replicate)
         lost_kg.append(lost)
+    if len(xs) == 1:
+        return TraySample(xs[0], masses[0], replicates[0]), lost_kg
     return TraySample(np.concatenate(xs), np.concatenate(masses), np.concatenate(replicates)), lost_kg
+
+
+@KERNEL
+def turned_copies(every, departed_copies, cos, sin, landed_x, landed_y, mass, replicate, copies, out_x, out_mass,
+                  out_replicate):
+    """Where copies land across the track (disc frame), their masses and replicates:
+    every copy in copy-major order when `every`, else those listed in `departed_copies`.
+
+    `departed_copies` (M,): copy-major indices k N + j (copy k of granule j, N granules);
+    `cos`, `sin` (K N,): the copies' turns; `landed_x`, `landed_y` (N,): the granules'
+    landings in the disc's frame (m); `mass` (N,) kg, shared by the `copies` copies.
+    Fills `out_x`, `out_mass`, `out_replicate` (M,). Compiled and GIL-free: batches finish scenes side by side."""
+    n = landed_x.size
+    for i in range(out_x.size):
+        row = i if every else departed_copies[i]
+        j = row % n
+        out_x[i] = cos[row] * landed_x[j] - sin[row] * landed_y[j]
+        out_mass[i] = mass[j] / copies
+        out_replicate[i] = replicate[j]
 
 
 def straight_paths(departure: Departure, plates: Sequence[Deflector], radius_m: np.ndarray) -> Departure:
