@@ -276,8 +276,78 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
     rows = [{"what": name, "batch": size, "threads": n, "designs_per_s": statistics.median(r),
              "designs_per_s_low": min(r), "designs_per_s_high": max(r)} for (name, size, n), r in rates.items()]
     core = batch_series(batch, repeats)
-    for group in (rows, core):
+    users = batch_user_rows(batch, repeats)
+    for group in [rows, core, *users]:
         base = group[0]["designs_per_s"]  # one by one at one thread
         for row in group:
             row["ratio_to_one_by_one_at_1_thread"] = row["designs_per_s"] / base
-    return rows + core
+    return rows + core + [row for group in users for row in group]
+
+
+def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
+    """Two users of the batch against their serial form (one design at a time, one
+    thread), each a group of rows whose first is the serial figure: `reference`'s pooling
+    (`pool_runs` of `runs` paper runs, against `run_scene` run by run) and one CMA-ES
+    generation on SpinnerDesign (the population `cma` asks for at the start, stepped as
+    one batch by `step_designs`, against one design at a time). Designs per second, median
+    of `repeats` interleaved blocks and their range; the block results are checked equal."""
+    import statistics
+    import time
+
+    import cma
+    import gymnasium as gym
+    import numpy as np
+
+    from spreadgym import threads
+    from spreadgym.agents.evaluation import EvalContext
+    from spreadgym.config.scene import load_scene
+    from spreadgym.envs.vector import step_designs
+    from spreadgym.physics.granules import replicate_sizes
+    from spreadgym.spread.pipeline import run_scene
+    from spreadgym.spread.reference import pool_runs
+
+    everything = threads.thread_count()
+    scene = load_scene("paper")
+    per_run = replicate_sizes(scene.sim.granules, scene.sim.replicates).size
+    env = gym.make("spreadgym:SpinnerDesign-v0")
+    dim = env.action_space.shape[0]
+    population = [np.asarray(x) for x in cma.CMAEvolutionStrategy(np.zeros(dim), 0.5, {"seed": 1, "verbose": -9}).ask()]
+    ctx = EvalContext(0, "compound-10-16-10", 4.0)
+    resets = [(1000 + k, ctx.options()) for k in range(len(population))]
+
+    def pooled_one_by_one():
+        return np.concatenate([run_scene(scene, ci=False, first_replicate=j * per_run).sample.x_m for j in range(runs)])
+
+    def generation_one_by_one():
+        return [step_designs(env, [reset], [x])[0][1] for reset, x in zip(resets, population)]
+
+    groups = {
+        f"reference: {runs} paper runs pooled": (runs, [("run_scene, run by run", 1, pooled_one_by_one),
+                                                       ("pool_runs (batches)", runs,
+                                                        lambda: pool_runs(scene, runs).x_m)]),
+        f"CMA-ES generation on SpinnerDesign ({len(population)} designs)": (
+            len(population), [("one design at a time", 1, generation_one_by_one),
+                              ("step_designs (one batch)", len(population),
+                               lambda: [step[1] for step in step_designs(env, resets, population)])]),
+    }
+    out = []
+    for title, (designs, ways) in groups.items():
+        plan = [(way, n) for way in ways for n in ((1,) if way[1] == 1 else sorted({1, everything}))]
+        rates = {(way[0], n): [] for way, n in plan}
+        found = {}
+        for block in range(repeats + 1):  # block 0 warms up
+            for way, n in plan:
+                threads.set_threads(n)
+                start = time.perf_counter()
+                found[way[0], n] = way[2]()
+                if block:
+                    rates[way[0], n].append(designs / (time.perf_counter() - start))
+        threads.set_threads(None)
+        first, *others = found.values()
+        if any(not np.array_equal(np.asarray(first), np.asarray(other)) for other in others):
+            raise AssertionError(f"{title}: the batch differs from one at a time")
+        out.append([{"what": f"{title}, {name}", "batch": size, "threads": n,
+                     "designs_per_s": statistics.median(rates[name, n]), "designs_per_s_low": min(rates[name, n]),
+                     "designs_per_s_high": max(rates[name, n])} for (name, size, _), n in plan])
+    env.close()
+    return out

@@ -3,14 +3,15 @@
 
 Granules never touch each other, so a batch is (design x disc x granule) independent
 problems. The stages:
-  1. plan each scene (its discs, model, granule sample and contacts; `pipeline.plan_scene`);
+  1. plan each scene (its discs, model, granule sample and contacts; `pipeline.plan_scene`),
+     one after another (small numpy work that holds the GIL);
   2. every disc of every scene through its spinner model at once: the compiled model runs
      all granules in one parallel kernel (`prange` over the flat (design x disc x granule)
      index; a twin machine is simply two discs in that index);
   3. finish each scene (cone, plates, release-angle copies, flight, trays, metrics;
      `pipeline.finish_scene`).
-Stages 1 and 3 run scenes side by side in a pool of threads (their compiled kernels
-release the GIL, so one scene's Python overlaps another's kernels). Every stage computes
+Stage 3 runs scenes side by side in a pool of threads (its compiled kernels release the
+GIL, so one scene's Python overlaps another's kernels). Every stage computes
 each scene exactly as `run_scene` does, so no result depends on the batch or on the
 thread count (spreadgym.threads decides the count).
 
@@ -24,7 +25,7 @@ from __future__ import annotations
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import Callable, Optional, Sequence, TypeVar, Union
+from typing import Optional, Sequence, Union
 
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Scene
@@ -32,9 +33,6 @@ from spreadgym.errors import ConfigError
 from spreadgym.physics.selection import SPINNER_MODELS
 from spreadgym.spread.pipeline import SimulationResult, finish_scene, plan_scene
 from spreadgym.threads import thread_count
-
-T = TypeVar("T")
-R = TypeVar("R")
 
 
 def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[MaterialLibrary] = None,
@@ -54,19 +52,22 @@ def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[Ma
         return []
     library = library or load_library()
     threads = min(thread_count(), len(scenes))
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        def side_by_side(work: Callable[[T], R], items: Sequence[T]) -> list[R]:
-            """`[work(item) for item in items]`, on the pool's threads when there are several."""
-            return [work(item) for item in items] if threads == 1 else list(pool.map(work, items))
+    # planning is small numpy work that holds the GIL throughout: threads would only take turns
+    plans = [plan_scene(scene, model, library, first) for scene, first in zip(scenes, firsts)]
+    departures = [[] for _ in plans]
+    for chosen in dict.fromkeys(plan.chosen for plan in plans):  # each model once, in order of first use
+        owners = [i for i, plan in enumerate(plans) if plan.chosen == chosen for _ in plan.spinner_runs()]
+        runs = [run for plan in plans if plan.chosen == chosen for run in plan.spinner_runs()]
+        for owner, departure in zip(owners, SPINNER_MODELS[chosen].run_batch(runs)):
+            departures[owner].append(departure)
 
-        plans = side_by_side(lambda i: plan_scene(scenes[i], model, library, firsts[i]), range(len(scenes)))
-        departures = [[] for _ in plans]
-        for chosen in dict.fromkeys(plan.chosen for plan in plans):  # each model once, in order of first use
-            owners = [i for i, plan in enumerate(plans) if plan.chosen == chosen for _ in plan.spinner_runs()]
-            runs = [run for plan in plans if plan.chosen == chosen for run in plan.spinner_runs()]
-            for owner, departure in zip(owners, SPINNER_MODELS[chosen].run_batch(runs)):
-                departures[owner].append(departure)
-        results = side_by_side(lambda i: finish_scene(plans[i], departures[i], ci), range(len(plans)))
+    def finish(i: int) -> SimulationResult:
+        return finish_scene(plans[i], departures[i], ci)
+    if threads == 1:
+        results = [finish(i) for i in range(len(plans))]
+    else:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            results = list(pool.map(finish, range(len(plans))))
     wall_s = (time.perf_counter() - started) / len(results)
     for result in results:
         result.metrics = replace(result.metrics, wall_s=wall_s)
