@@ -7,6 +7,10 @@ cell's seed sequence), and its deterministic action sets the settings. The actio
 settings are put into the cell's scene and read back as a unit vector of the chart's
 settings space, so a policy trained with other ranges still lands on the same dial.
 No simulation runs to make the proposal.
+
+A policy is shipped for a scene in `configs/policies/<scene name>/` (model.zip, the run's
+config.yaml and a README saying how it was trained); it is the default of `--method
+policy` and `policy+search` on that scene (`shipped_policy`).
 """
 
 from __future__ import annotations
@@ -17,10 +21,24 @@ from pathlib import Path
 
 import numpy as np
 
+from spreadgym.config.resources import config_dir
 from spreadgym.config.scene import Scene, scene_with
 from spreadgym.errors import ConfigError, SpreadgymError
 
 DESIGN_ENV = "SpinnerDesign-v0"
+POLICIES = "policies"  # under the shipped configs: one folder per scene name
+
+
+def shipped_policy(scene: Scene, method: str) -> Path:
+    """The run folder of the policy shipped for `scene`'s name; a one-line SpreadgymError
+    naming --policy where none is shipped."""
+    root = config_dir() / POLICIES
+    folder = root / scene.name
+    if not (folder / "model.zip").is_file():
+        shipped = sorted(p.name for p in root.iterdir() if (p / "model.zip").is_file()) if root.is_dir() else []
+        raise SpreadgymError(f"--policy: needed by --method {method} on scene {scene.name!r}: no policy is shipped "
+                             f"for it (shipped: {', '.join(shipped) or 'none'}); give one saved by spreadgym train")
+    return folder
 
 
 @lru_cache(maxsize=2)

@@ -64,6 +64,7 @@ def chart_quality(payload: dict) -> dict:
 QUALITY_CHARTS = (  # as measured in docs/charts.md (small); the full charts are 3:6:0.5 and 4:12:1
     ("paper", "3:6:1", "cmaes", None),
     ("field", "4:12:4", "cmaes", None),
+    ("paper", "3:6:1", "policy", None),  # the policy shipped for the paper scene (configs/policies/paper/)
 )
 QUALITY_OPTIONS = dict(fertilizers="all", budget=48, granules=1024)
 

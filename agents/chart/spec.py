@@ -204,16 +204,15 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
     """A checked ChartSpec and notes for people. Every problem is a SpreadgymError naming
     the flag or key: unknown fertilizer or model, width off the tray grid or beyond what
     the scene can throw, budget or granules below 1, settings ranges out of bounds, an
-    unknown objective or method, a policy missing or given without a policy method, a
-    variability entry out of range."""
+    unknown objective or method, a policy given without a policy method or missing where
+    the scene has no shipped one (`policy.shipped_policy`), a variability entry out of range."""
     library = library or load_library()
     if objective not in OBJECTIVES:
         raise SpreadgymError(f"--objective: {brief(objective)}; allowed: {', '.join(OBJECTIVES)}")
     if method not in METHODS:
         raise SpreadgymError(f"--method: {brief(method)}; allowed: {', '.join(METHODS)}")
-    if (policy is None) == method.startswith("policy"):
-        raise SpreadgymError(f"--policy: {'needed by' if policy is None else 'not used by'} --method {method}"
-                             + (" (a policy saved by spreadgym train)" if policy is None else ""))
+    if policy is not None and not method.startswith("policy"):
+        raise SpreadgymError(f"--policy: not used by --method {method}")
     variability = check_variability(variability)
     base = load_scene(scene)
     if not 1 <= int(budget) <= MAX_BUDGET:
@@ -237,10 +236,10 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
         raise SpreadgymError("--widths: give at least one width")
     check_widths(widths_m, base.pattern.tray_width_m)
     digest = None
-    if policy is not None:
-        from spreadgym.agents.chart.policy import check_policy
+    if method.startswith("policy"):
+        from spreadgym.agents.chart.policy import check_policy, shipped_policy
 
-        policy, digest = check_policy(policy, base)
+        policy, digest = check_policy(shipped_policy(base, method) if policy is None else policy, base)
     spec = ChartSpec(base.model_dump(mode="json"), names, tuple(sorted(widths_m)), driving, int(budget), granules,
                      int(seed), search_model, verify_model, int(verify_runs), settings, objective, method, policy,
                      digest, variability)

@@ -15,7 +15,8 @@ DRIVING = ("racetrack", "back-and-forth")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
-    from spreadgym.agents.chart.spec import MAX_BUDGET, METHODS, OBJECTIVES
+    from spreadgym.agents.chart.spec import MAX_BUDGET, METHODS, OBJECTIVES, VERIFY_MODEL
+    from spreadgym.physics.selection import MODELS
 
     parser.add_argument("--scene", required=True, metavar="S", help="shipped scene name or a YAML path")
     parser.add_argument("--fertilizers", required=True, metavar="F1,F2|all",
@@ -46,7 +47,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "model); nominal: the CV of the nominal scene (default robust)")
     parser.add_argument("--policy", metavar="PATH",
                         help="a SpinnerDesign policy saved by spreadgym train (DIR or DIR/model.zip), for "
-                             "--method policy and policy+search")
+                             "--method policy and policy+search (default: the one shipped for the scene, "
+                             "configs/policies/SCENE/)")
+    parser.add_argument("--verify-model", choices=MODELS, default=VERIFY_MODEL,
+                        help=f"the model every cell is verified with, nominal and p90 runs (default "
+                             f"{VERIFY_MODEL}, the full model; compiled: its contact laws per granule, within "
+                             f"0.5 pp CV of it at a few hundredths of its cost: docs/fidelity.md)")
     parser.add_argument("--variability", metavar="FILE",
                         help="a YAML file with a 'variability:' section over the defaults "
                              "(configs/chart_variability.yaml)")
@@ -60,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
 
     result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving, budget=args.budget,
                    granules=args.granules, seed=args.seed, workers=args.workers, address=args.address,
-                   method=args.method, objective=args.objective, policy=args.policy, variability=args.variability)
+                   method=args.method, objective=args.objective, policy=args.policy, variability=args.variability,
+                   verify_model=args.verify_model)
     for key, problem in result.replaced.items():
         print(f"cells/{key}.json was not its cell's record ({problem}): computed again", file=sys.stderr)
     if args.json:

@@ -143,7 +143,6 @@ def test_a_policy_fills_every_cell_without_a_search_and_the_search_starts_there(
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--method", "policy"], "--policy: needed by --method policy"),
     (["--policy", "x.zip"], "--policy: not used by --method cmaes"),
     (["--method", "policy", "--policy", "nowhere/model.zip"], "--policy nowhere/model.zip: no such file"),
     (["--objective", "median"], "--objective: invalid choice"),
