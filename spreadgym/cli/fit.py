@@ -74,6 +74,12 @@ def summary(data: dict) -> str:
     lines = [f"fit of {data['scene']} to {data['trays_file']} ({data['trays_used']} trays, "
              f"{data['evaluations']} evaluations, {data['wall_s']:.0f} s)", table,
              f"catch noise: {100 * data['catch_noise_sd']:.1f} % per tray (estimated)"]
+    if data["discrepancy_points"]:
+        lines.append("intervals carry the compiled model's measured difference from the full model "
+                     f"({data['discrepancy_points']} calibration points)")
+    else:
+        lines.append("intervals carry no model difference (none is stored for this scene, fertilizer and "
+                     "rotation, or the fit ran the full model)")
     for pair in data["trade_offs"]:
         lines.append(f"trade-off: {pair['keys'][0]} and {pair['keys'][1]} (correlation {pair['correlation']:+.2f})")
     cv, band = data["cv_percent_at_target"], data["cv_percent_at_target_band"]

@@ -4,16 +4,18 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
 from spreadgym.config.scene import Scene, scene_with
 from spreadgym.errors import SpreadgymError
 from spreadgym.fit import optimise, uncertainty
+from spreadgym.fit.discrepancy import Discrepancy, stored_discrepancy
 from spreadgym.fit.likelihood import PatternModel, residuals
 from spreadgym.fit.space import FitSpace
 from spreadgym.fit.trays import TrayTest
+from spreadgym.physics.selection import choose_model
 
 FIT_GRANULES = 4096  # granules per evaluation (x sim.angle_copies landing samples)
 FIT_REPLICATES = 16  # independent replicates per evaluation: the jackknife of the simulation's error (15 d.o.f.)
@@ -38,6 +40,11 @@ class FitResult:
     weakest: dict[str, float]  # unit-cube direction the test determines least
     weakest_eigenvalue: float
     catch_sd: float  # estimated catch noise (log s.d.)
+    simulation_sd: np.ndarray  # (d,) the estimate's s.d. from the simulation's Monte Carlo error, key units
+    model_sd: np.ndarray  # (d,) its s.d. from the fit model's discrepancy from the full model, key units
+    bare_low: np.ndarray  # (d,) the 90 % interval without the model's discrepancy (to measure what it adds)
+    bare_high: np.ndarray
+    discrepancy_points: int  # calibration points behind model_sd (0: none carried)
     log_scale: float  # a: fitted mass = exp(a) x simulated mass
     cost: float  # sum of squared standardised residuals at the estimate
     threshold: float  # its rise bounding the 90 % intervals
@@ -55,11 +62,18 @@ class FitResult:
 
 
 def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "auto",
-                  granules: Optional[int] = FIT_GRANULES, seed: int = 0) -> FitResult:
+                  granules: Optional[int] = FIT_GRANULES, seed: int = 0,
+                  discrepancy: Union[Discrepancy, None, str] = "stored") -> FitResult:
     """Fit the keys of `space` to `test`; the evaluations use `granules` granules (None: the
     scene's) and the scene's sim.seed for every point (common random numbers); `seed` draws
-    the Sobol start design."""
+    the Sobol start design. `discrepancy`: the fit model's measured difference from the full
+    model carried into the intervals; "stored": the one stored for the scene when the fit
+    runs the compiled model (none for the full model or an uncalibrated scene); None: none."""
     started = time.perf_counter()
+    if isinstance(discrepancy, str):
+        if discrepancy != "stored":
+            raise SpreadgymError(f"discrepancy: {discrepancy!r} is not a Discrepancy, None or 'stored'")
+        discrepancy = stored_discrepancy(scene) if choose_model(scene, model)[0] == "compiled" else None
     evaluation = scene_with(scene, {"sim.replicates": FIT_REPLICATES, **({} if granules is None else
                                                                          {"sim.granules": granules})})
     pattern_model = PatternModel(evaluation, space, test, model)
@@ -78,8 +92,16 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
         best = optimise.minimise(objective, [lowest.unit])  # a profile found a lower point: start again there
     sim_sd = uncertainty.simulation_sd(objective, best, jac)
     replicates = pattern_model.predict([best.unit])[0].replicate_kg.shape[0]
-    low, high = zip(*(uncertainty.widened(best.unit[j], i.low, i.high, sim_sd[j], replicates)
+    model_sd, calibration_points = np.zeros(space.dims), 0
+    if discrepancy is not None:
+        delta, variance = discrepancy.on_trays(pattern_model.local_index * scene.pattern.tray_width_m,
+                                               scene.pattern.tray_width_m)
+        model_sd, calibration_points = uncertainty.model_sd(objective, best, jac, delta, variance), discrepancy.points
+    low, high = zip(*(uncertainty.widened(best.unit[j], i.low, i.high,
+                                          [(sim_sd[j], replicates - 1), (model_sd[j], calibration_points)])
                       for j, i in enumerate(intervals)))
+    bare_low, bare_high = zip(*(uncertainty.widened(best.unit[j], i.low, i.high, [(sim_sd[j], replicates - 1)])
+                                for j, i in enumerate(intervals)))
     points = [p for i in intervals for p in (i.low_point, i.high_point)]
     open_ends = [(bool(i.low_open or lo == 0.0), bool(i.high_open or hi == 1.0))
                  for i, lo, hi in zip(intervals, low, high)]
@@ -91,5 +113,8 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
         low=space.values(np.array(low)), high=space.values(np.array(high)), interval_points=points,
         open_ends=open_ends, identifiable=identifiable, correlation=uncertainty.correlations(info),
         weakest={k: float(v) for k, v in zip(space.keys, direction)}, weakest_eigenvalue=float(eigenvalue),
-        catch_sd=objective.sigma, log_scale=log_scale, cost=best.cost, threshold=level,
+        catch_sd=objective.sigma, simulation_sd=sim_sd * (space.high - space.low),
+        model_sd=model_sd * (space.high - space.low), bare_low=space.values(np.array(bare_low)),
+        bare_high=space.values(np.array(bare_high)),
+        discrepancy_points=calibration_points, log_scale=log_scale, cost=best.cost, threshold=level,
         wall_s=time.perf_counter() - started)

@@ -10,7 +10,8 @@ crosses that level or meets the search bound; the crossing is interpolated on th
 signed root of S_j - S_min, which a near-linear model makes linear. The simulation's own
 Monte Carlo error, the same at every point under common random numbers, is added in
 quadrature (`simulation_sd`): on the field scene at 4096 granules it is as large as the
-catch noise's part, and without it 18 of 30 one-key intervals held the truth.
+catch noise's part, and without it 18 of 30 one-key intervals held the truth. So is the
+fit model's measured discrepancy from the full model (`model_sd`, `spreadgym.fit.discrepancy`).
 
 A key is identifiable when its interval covers at most IDENTIFIABLE_SHARE of its search
 range. Trade-offs come from the Gauss-Newton information J'J at the estimate: the
@@ -21,6 +22,7 @@ eigenvalue), which a flat ridge such as drag coefficient x air density shows at 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 from scipy.stats import f as f_distribution
@@ -83,10 +85,32 @@ def simulation_sd(objective: Objective, best: Minimum, jac: np.ndarray) -> np.nd
     return np.sqrt((k - 1) / k * np.sum((moves - moves.mean(axis=0)) ** 2, axis=0))
 
 
-def widened(estimate: float, low: float, high: float, sim_sd: float, replicates: int) -> tuple[float, float]:
-    """The profile interval's two half-widths combined in quadrature with the simulation's
-    Monte Carlo part (Student t, K - 1 degrees of freedom for the jackknife), clipped to the cube."""
-    q = float(t_distribution.ppf(0.5 + LEVEL / 2, max(replicates - 1, 1))) * sim_sd
+def model_sd(objective: Objective, best: Minimum, jac: np.ndarray, delta: np.ndarray,
+             variance: np.ndarray) -> np.ndarray:
+    """(d,) unit-cube s.d. of the estimate from the fit model's discrepancy from the full model.
+
+    `delta` (C, n): measured full-minus-compiled log masses on the test's trays at C
+    calibration points, `variance` (C, n) their Monte Carlo variances. Data shifted by a
+    discrepancy move the Gauss-Newton estimate by (J'J)^+ J' L delta, L the standardised
+    residuals' linear map (the log scale profiled out); the mean square of the C moves,
+    less their mean Monte Carlo variance, estimates the squared model error (clipped at 0)."""
+    prediction = objective.model.predict([best.unit])[0]
+    root_w = 1.0 / np.sqrt(objective.sigma ** 2 + prediction.variance)
+    weight = root_w ** 2
+    profiled = np.eye(weight.size) - np.outer(np.ones(weight.size), weight / weight.sum())
+    move = np.linalg.pinv(jac.T @ jac) @ jac.T @ (root_w[:, None] * profiled)  # (d, n)
+    moves = np.asarray(delta) @ move.T  # (C, d)
+    noise = np.asarray(variance) @ (move ** 2).T  # (C, d)
+    return np.sqrt(np.clip(np.mean(moves ** 2, axis=0) - np.mean(noise, axis=0), 0.0, None))
+
+
+def widened(estimate: float, low: float, high: float, parts: Sequence[tuple[float, int]]) -> tuple[float, float]:
+    """The profile interval's two half-widths combined in quadrature with further error parts,
+    each an s.d. (unit cube) and its degrees of freedom (Student t): the simulation's Monte
+    Carlo part (K - 1 for the jackknife), the model's discrepancy (C calibration points);
+    clipped to the cube."""
+    q = float(np.hypot.reduce([0.0] + [float(t_distribution.ppf(0.5 + LEVEL / 2, max(dof, 1))) * sd
+                                       for sd, dof in parts]))
     return (max(0.0, estimate - float(np.hypot(estimate - low, q))),
             min(1.0, estimate + float(np.hypot(high - estimate, q))))
 
