@@ -5,8 +5,9 @@ granules sliding (rotation locked) or free to roll, and true vane friction and v
 restitution drawn from a scrambled Sobol sequence. The truth is simulated with
 `truth_model` (the full model, pymunk, by default) at `truth_granules` granules and a
 seed no fit uses, caught by 0.5 m trays in one pass with 5 % log-normal catch noise;
-the fit (compiled model) searches vane friction in [0.2, 0.8] and vane restitution in
-[0.2, 0.7]. Scored: whether each 90 % interval holds the truth (coverage, split by
+the fit (compiled model, its granules drawn with sim.seed = the test's index, so every
+test is its own draw of the simulation's error) searches vane friction in [0.2, 0.8]
+and vane restitution in [0.2, 0.7]. Scored: whether each 90 % interval holds the truth (coverage, split by
 whether the fit called the key identifiable), the vane friction's error, the fit's
 wall time.
 """
@@ -31,6 +32,7 @@ TRUTH_RANGES = {"contact.vane_friction": (0.3, 0.6), "contact.vane_restitution":
 SEARCH = "contact.vane_friction=0.2:0.8,contact.vane_restitution=0.2:0.7"
 FRICTION_TOLERANCE = 0.05
 COVERAGE_TARGET = (0.80, 0.98)
+TRUTH_CACHE = Path("out/fit-truths")  # gitignored: the truths' simulated passes, keyed by scene and model
 
 
 def cases(tests: int, seed: int = 0) -> list[dict]:
@@ -47,20 +49,24 @@ def cases(tests: int, seed: int = 0) -> list[dict]:
     return out
 
 
-def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: int, threads: Optional[int]) -> dict:
-    """One synthetic test, fitted; a flat row of the results."""
-    from spreadgym.config.scene import load_scene
+def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: int, threads: Optional[int],
+             cache: Optional[Path] = None) -> dict:
+    """One synthetic test, fitted; a flat row of the results. The truth's simulated pass is
+    read from / kept in `cache` when given."""
+    from spreadgym.config.scene import load_scene, scene_with
     from spreadgym.fit.run import fit_tray_test
     from spreadgym.fit.space import parse_fit_specs
     from spreadgym.fit.synthetic import synthetic_tray_test
+    from spreadgym.fit.uncertainty import IDENTIFIABLE_SHARE
     from spreadgym.threads import set_threads
 
     if threads is not None:
         set_threads(threads)
     scene = load_scene(case["scene"], {"fertilizer": case["fertilizer"], "granule.rotation": case["rotation"]})
+    fitted = scene_with(scene, {"sim.seed": case["test"]})  # each test its own draw of the fit's granules
     test = synthetic_tray_test(scene, case["truth"], model=truth_model, granules=truth_granules,
-                               noise_seed=case["test"])
-    fit = fit_tray_test(scene, parse_fit_specs([SEARCH], scene), test, granules=fit_granules, seed=0)
+                               noise_seed=case["test"], cache=cache)
+    fit = fit_tray_test(fitted, parse_fit_specs([SEARCH], scene), test, granules=fit_granules, seed=case["test"])
     row = {key: case[key] for key in ("test", "scene", "fertilizer", "rotation")}
     for j, key in enumerate(fit.space.keys):
         name = key.split(".")[-1]
@@ -68,27 +74,35 @@ def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: in
         row.update({f"{name}_truth": value, f"{name}_estimate": float(fit.estimate[j]),
                     f"{name}_low": float(fit.low[j]), f"{name}_high": float(fit.high[j]),
                     f"{name}_covered": bool(fit.low[j] <= value <= fit.high[j]),
-                    f"{name}_identifiable": fit.identifiable[key]})
-    row.update({"truth_model": truth_model, "catch_sd": fit.catch_sd, "trays": fit.model.trays,
+                    f"{name}_identifiable": fit.identifiable[key],
+                    f"{name}_simulation_sd": float(fit.simulation_sd[j]), f"{name}_model_sd": float(fit.model_sd[j]),
+                    f"{name}_bare_low": float(fit.bare_low[j]), f"{name}_bare_high": float(fit.bare_high[j]),
+                    f"{name}_bare_covered": bool(fit.bare_low[j] <= value <= fit.bare_high[j]),
+                    f"{name}_bare_identifiable": bool(fit.space.unit(fit.bare_high)[j] - fit.space.unit(fit.bare_low)[j]
+                                                      <= IDENTIFIABLE_SHARE)})
+    row.update({"truth_model": truth_model, "discrepancy_points": fit.discrepancy_points, "catch_sd": fit.catch_sd, "trays": fit.model.trays,
                 "evaluations": fit.model.evaluations, "fit_wall_s": fit.wall_s})
     return row
 
 
 def fit_bench_rows(out: Path, tests: int = 40, workers: int = 1, truth_model: str = "pymunk",
                    truth_granules: int = 16384, fit_granules: int = 4096,
-                   progress: Optional[Callable[[str], None]] = None) -> list[dict]:
+                   progress: Optional[Callable[[str], None]] = None,
+                   cache: Optional[Path] = TRUTH_CACHE) -> list[dict]:
     """Run `tests` synthetic tests on `workers` processes (each with cores / workers threads);
-    write `out`/fit.md (the summary against the targets); the rows, one per test."""
+    write `out`/fit.md (the summary against the targets); the rows, one per test. The truths'
+    simulated passes are kept in `cache` (None: not kept), so a re-fit does not simulate them again."""
     todo = cases(tests)
     threads = max(1, len(os.sched_getaffinity(0)) // workers)
     rows = []
     if workers == 1:
         for case in todo:
-            rows.append(run_case(case, truth_model, truth_granules, fit_granules, threads))
+            rows.append(run_case(case, truth_model, truth_granules, fit_granules, threads, cache))
             _say(progress, rows[-1])
     else:
         with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(run_case, c, truth_model, truth_granules, fit_granules, threads) for c in todo]
+            futures = [pool.submit(run_case, c, truth_model, truth_granules, fit_granules, threads, cache)
+                       for c in todo]
             for future in futures:
                 rows.append(future.result())
                 _say(progress, rows[-1])
@@ -121,12 +135,26 @@ def fit_markdown(rows: list[dict], fit_granules: int, truth_granules: int, worke
              f"{len(rows)} tests; truth: {rows[0]['truth_model'] if rows else '-'} model, {truth_granules} granules, "
              f"5 % catch noise, 0.5 m trays, one pass; fit: compiled model, {fit_granules} granules per "
              f"evaluation, search {SEARCH}; {workers} worker(s) x {threads} thread(s).", "",
-             "| key | tests | identifiable | 90 % coverage (identifiable) | coverage (all) |", "|---|---|---|---|---|"]
+             "Intervals with the model discrepancy carried (the fit's) and without it (the profile and the "
+             "simulation's error only: the fit before the discrepancy was added), on the same tests:", "",
+             "| key | intervals | tests | identifiable (sliding / rolling) | 90 % coverage (identifiable) "
+             "| coverage (all) |", "|---|---|---|---|---|---|"]
     for name in ("vane_friction", "vane_restitution"):
-        ident = [r for r in rows if r[f"{name}_identifiable"]]
-        lines.append(f"| {name} | {len(rows)} | {len(ident)} | "
-                     f"{_share(sum(r[f'{name}_covered'] for r in ident), len(ident))} | "
-                     f"{_share(sum(r[f'{name}_covered'] for r in rows), len(rows))} |")
+        for label, prefix in (("with discrepancy", name), ("without", f"{name}_bare")):
+            ident = [r for r in rows if r[f"{prefix}_identifiable"]]
+            split = " / ".join(str(sum(r["rotation"] == rotation for r in ident)) for rotation in ROTATIONS)
+            lines.append(f"| {name} | {label} | {len(rows)} | {len(ident)} ({split}) | "
+                         f"{_share(sum(r[f'{prefix}_covered'] for r in ident), len(ident))} | "
+                         f"{_share(sum(r[f'{prefix}_covered'] for r in rows), len(rows))} |")
+    lines += ["", "Median s.d. of the estimate from the model discrepancy (from the simulation's error):", "",
+              "| key | sliding (locked) | rolling (free) |", "|---|---|---|"]
+    for name in ("vane_friction", "vane_restitution"):
+        cells = []
+        for rotation in ROTATIONS:
+            subset = [r for r in rows if r["rotation"] == rotation]
+            cells.append(f"{statistics.median(r[f'{name}_model_sd'] for r in subset):.3f} "
+                         f"({statistics.median(r[f'{name}_simulation_sd'] for r in subset):.3f})" if subset else "-")
+        lines.append(f"| {name} | {' | '.join(cells)} |")
     lines += ["", "| vane friction within +-0.05 | tests | share |", "|---|---|---|"]
     for label, subset in (("granules sliding (locked)", [r for r in rows if r["rotation"] == "locked"]),
                           ("granules rolling (free)", [r for r in rows if r["rotation"] == "free"]),
