@@ -15,7 +15,9 @@ from spreadgym.cli import arguments
 from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
-            "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "env-noise", "batch")
+            "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "env-noise", "chart-quality",
+            "fit", "batch")
+"""Every section, in the order `make bench` runs them (`section_runners` gives each its work)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,9 +35,9 @@ def write_csv(rows: list[dict], path: Path) -> None:
         writer.writerows(rows)
 
 
-def run(args: argparse.Namespace) -> int:
+def section_runners(args: argparse.Namespace, say) -> dict:
+    """What each of SECTIONS runs (a callable giving its rows), with `args.out` and `args.repeats`."""
     from spreadgym.agents.chart import quality, scale
-    from spreadgym.errors import SpreadgymError
     from spreadgym.studies import (
         benchmarks,
         estimate_bench,
@@ -48,15 +50,7 @@ def run(args: argparse.Namespace) -> int:
         startup,
     )
 
-    if args.repeats < 1:
-        raise SpreadgymError(f"--repeats: {args.repeats} must be at least 1")
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-
-    def say(text: str) -> None:
-        print(text, file=sys.stderr)
-
-    sections = args.only or list(SECTIONS)
-    runners = {
+    return {
         "spinner": lambda: benchmarks.spinner_benchmark(repeats=args.repeats),
         "methods": lambda: benchmarks.method_speed_benchmark(repeats=args.repeats),
         "flight": lambda: benchmarks.flight_benchmark(repeats=max(args.repeats, 5)),
@@ -80,6 +74,22 @@ def run(args: argparse.Namespace) -> int:
                                                 progress=say),
         "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
     }
+
+
+def run(args: argparse.Namespace) -> int:
+    from spreadgym.agents.chart import scale
+    from spreadgym.errors import SpreadgymError
+    from spreadgym.studies import estimate_bench, speed_accuracy
+
+    if args.repeats < 1:
+        raise SpreadgymError(f"--repeats: {args.repeats} must be at least 1")
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+    def say(text: str) -> None:
+        print(text, file=sys.stderr)
+
+    sections = args.only or list(SECTIONS)
+    runners = section_runners(args, say)
     plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy,
              "chart-scale": scale.plot_chart_scale}
     for name in sections:
