@@ -107,7 +107,8 @@ def paired_log_ratio(top: SimulatedPass, bottom: SimulatedPass) -> tuple[np.ndar
         raise ValueError("no tray caught granules in both passes with every replicate left out")
 
     def log_ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return np.log(a[..., kept] / a.sum(axis=-1, keepdims=True)) - np.log(b[..., kept] / b.sum(axis=-1, keepdims=True))
+        share = [np.log(m[..., kept] / m.sum(axis=-1, keepdims=True)) for m in (a, b)]
+        return share[0] - share[1]
 
     delta = log_ratio(grids[0].sum(axis=0), grids[1].sum(axis=0))
     jack = log_ratio(left_out[0], left_out[1])

@@ -80,8 +80,8 @@ def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: in
                     f"{name}_bare_covered": bool(fit.bare_low[j] <= value <= fit.bare_high[j]),
                     f"{name}_bare_identifiable": bool(fit.space.unit(fit.bare_high)[j] - fit.space.unit(fit.bare_low)[j]
                                                       <= IDENTIFIABLE_SHARE)})
-    row.update({"truth_model": truth_model, "discrepancy_points": fit.discrepancy_points, "catch_sd": fit.catch_sd, "trays": fit.model.trays,
-                "evaluations": fit.model.evaluations, "fit_wall_s": fit.wall_s})
+    row.update({"truth_model": truth_model, "discrepancy_points": fit.discrepancy_points, "catch_sd": fit.catch_sd,
+                "trays": fit.model.trays, "evaluations": fit.model.evaluations, "fit_wall_s": fit.wall_s})
     return row
 
 

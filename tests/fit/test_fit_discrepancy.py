@@ -33,8 +33,8 @@ def offset_fits():
     scene = load_scene("paper", {"granule.rotation": "locked"})
     test = synthetic_tray_test(scene, {KEY: 0.5 + OFFSET}, model="compiled", granules=65536, noise_seed=4)
     space = parse_fit_specs([f"{KEY}=0.3:0.8"], scene)
-    fit = lambda d: fit_tray_test(scene, space, test, model="compiled", granules=2048, seed=4, discrepancy=d)
-    return fit(None), fit(_shifted_discrepancy(scene))
+    return tuple(fit_tray_test(scene, space, test, model="compiled", granules=2048, seed=4, discrepancy=d)
+                 for d in (None, _shifted_discrepancy(scene)))
 
 
 def test_a_known_offset_is_measured_and_covered(offset_fits):
