@@ -3,8 +3,9 @@
 The fit simulates with the compiled model; the full model (pymunk) stands for the
 spreader. At the same parameters the two differ by a small smooth pattern change (a
 shift or stretch of a few tenths of a per cent of the mass per tray), and a smooth change
-looks like a parameter change: on the field scene's 43 trays it moved vane friction and
-restitution by 0.01-0.025, more than their intervals. A per-tray variance in the
+looks like a parameter change (measured on the shipped scenes: a move of 0.001-0.008 in
+vane friction and restitution, s.d., against a simulation s.d. of about 0.007; docs/fit.md).
+A per-tray variance in the
 likelihood cannot carry it (a relative variance the same on every tray only adds to
 sigma^2, and sigma is fitted from the residuals: the intervals stay as they were), so it
 is carried the way the simulation's own error is: measured discrepancies are moved
