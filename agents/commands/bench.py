@@ -296,8 +296,10 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
 
 def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     """Two users of the batch against their serial form (one design at a time, one
-    thread), each a group of rows whose first is the serial figure: `reference`'s pooling
-    (`pool_runs` of `runs` paper runs, against `run_scene` run by run) and one CMA-ES
+    thread), each a group of rows whose first is the serial figure: what `spreadgym
+    reference --replicates RUNS` runs (`precision.reference_precisely`: `runs` paper runs
+    through the batch, their replicate tray masses pooled), against `run_scene` run by run
+    pooled the same way, and one CMA-ES
     generation on SpinnerDesign (the population `cma` asks for at the start, stepped as
     one batch by `step_designs`, against one design at a time). Designs per second, median
     of `repeats` interleaved blocks and their range; the block results are checked equal."""
@@ -314,7 +316,7 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     from spreadgym.envs.vector import step_designs
     from spreadgym.physics.granules import replicate_sizes
     from spreadgym.spread.pipeline import run_scene
-    from spreadgym.spread.reference import pool_runs
+    from spreadgym.spread.precision import PooledMasses, reference_precisely
 
     everything = threads.thread_count()
     scene = load_scene("paper")
@@ -325,16 +327,21 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     ctx = EvalContext(0, "compound-10-16-10", 4.0)
     resets = [(1000 + k, ctx.options()) for k in range(len(population))]
 
+    def pooled_in_batches():
+        return reference_precisely(scene, runs=runs).pooled.pooled.masses()
+
     def pooled_one_by_one():
-        return np.concatenate([run_scene(scene, ci=False, first_replicate=j * per_run).sample.x_m for j in range(runs)])
+        pooled = PooledMasses(scene.pattern.tray_width_m)
+        for j in range(runs):
+            pooled.add(run_scene(scene, ci=False, first_replicate=j * per_run).replicate_masses_kg)
+        return pooled.masses()
 
     def generation_one_by_one():
         return [step_designs(env, [reset], [x])[0][1] for reset, x in zip(resets, population)]
 
     groups = {
         f"reference: {runs} paper runs pooled": (runs, [("run_scene, run by run", 1, pooled_one_by_one),
-                                                       ("pool_runs (batches)", runs,
-                                                        lambda: pool_runs(scene, runs).x_m)]),
+                                                       ("reference_precisely (batches)", runs, pooled_in_batches)]),
         f"CMA-ES generation on SpinnerDesign ({len(population)} designs)": (
             len(population), [("one design at a time", 1, generation_one_by_one),
                               ("step_designs (one batch)", len(population),
