@@ -18,7 +18,7 @@ the same parameters, granules and seed (paired: the same granules, so their samp
 noise mostly cancels), per tray where both caught something in every leave-one-out
 replicate set; its Monte Carlo variance from the delete-one-replicate jackknife over the
 paired replicates. They are measured at calibration points drawn over the search box
-(`calibration_points`, a Sobol sequence of its own seed and seeds of their own, never
+(`sobol_points`, a Sobol sequence of its own seed and seeds of their own, never
 the bench's truths) for each shipped single-disc scene, fertilizer and granule rotation,
 and stored in `discrepancy.csv` beside this module (`spreadgym.studies.fit_discrepancy`
 writes it). A fit of another scene has no stored discrepancy and reports none.
@@ -68,8 +68,9 @@ class Discrepancy:
         return delta, variance
 
 
-def calibration_points(ranges: Mapping[str, tuple[float, float]], count: int, seed: int = 1) -> list[dict]:
-    """`count` points over `ranges` (key -> (low, high)) from a scrambled Sobol sequence."""
+def sobol_points(ranges: Mapping[str, tuple[float, float]], count: int, seed: int = 1) -> list[dict]:
+    """`count` points over `ranges` (key -> (low, high)) from a scrambled Sobol sequence of
+    `seed`, each value rounded to 4 decimals (the calibration points; the fit bench's truths)."""
     m = int(np.ceil(np.log2(max(count, 1))))
     units = qmc.Sobol(len(ranges), scramble=True, seed=seed).random_base2(m)[:count]
     return [{key: round(float(lo + u * (hi - lo)), 4) for (key, (lo, hi)), u in zip(ranges.items(), unit)}

@@ -105,7 +105,7 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
     points = [p for i in intervals for p in (i.low_point, i.high_point)]
     open_ends = [(bool(i.low_open or lo == 0.0), bool(i.high_open or hi == 1.0))
                  for i, lo, hi in zip(intervals, low, high)]
-    identifiable = {key: bool(hi - lo <= uncertainty.IDENTIFIABLE_SHARE) for key, lo, hi in zip(space.keys, low, high)}
+    identifiable = {key: uncertainty.determined(lo, hi) for key, lo, hi in zip(space.keys, low, high)}
     direction, eigenvalue = uncertainty.weakest_direction(info)
     _, log_scale = residuals(pattern_model.log_mass, pattern_model.predict([best.unit])[0], objective.sigma)
     return FitResult(

@@ -104,6 +104,12 @@ def model_sd(objective: Objective, best: Minimum, jac: np.ndarray, delta: np.nda
     return np.sqrt(np.clip(np.mean(moves ** 2, axis=0) - np.mean(noise, axis=0), 0.0, None))
 
 
+def determined(low: float, high: float) -> bool:
+    """Whether the test determines a key whose interval is [low, high] (unit cube): it
+    covers at most IDENTIFIABLE_SHARE of the search range."""
+    return bool(high - low <= IDENTIFIABLE_SHARE)
+
+
 def widened(estimate: float, low: float, high: float, parts: Sequence[tuple[float, int]]) -> tuple[float, float]:
     """The profile interval's two half-widths combined in quadrature with further error parts,
     each an s.d. (unit cube) and its degrees of freedom (Student t): the simulation's Monte

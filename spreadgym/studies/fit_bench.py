@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
-from scipy.stats import beta, qmc
+from scipy.stats import beta
 
 SCENES = ("paper", "field")
 FERTILIZERS = ("compound-10-16-10", "pellet")
@@ -37,14 +37,12 @@ TRUTH_CACHE = Path("out/fit-truths")  # gitignored: the truths' simulated passes
 
 def cases(tests: int, seed: int = 0) -> list[dict]:
     """`tests` test cases cycling through scene x fertilizer x rotation, truths from a Sobol sequence."""
+    from spreadgym.fit.discrepancy import sobol_points
+
     combos = list(product(SCENES, FERTILIZERS, ROTATIONS))
-    m = int(np.ceil(np.log2(max(tests, 1))))
-    points = qmc.Sobol(len(TRUTH_RANGES), scramble=True, seed=seed).random_base2(m)
     out = []
-    for i in range(tests):
+    for i, truth in enumerate(sobol_points(TRUTH_RANGES, tests, seed)):
         scene, fertilizer, rotation = combos[i % len(combos)]
-        truth = {key: round(float(lo + u * (hi - lo)), 4)
-                 for (key, (lo, hi)), u in zip(TRUTH_RANGES.items(), points[i])}
         out.append({"test": i, "scene": scene, "fertilizer": fertilizer, "rotation": rotation, "truth": truth})
     return out
 
@@ -57,7 +55,7 @@ def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: in
     from spreadgym.fit.run import fit_tray_test
     from spreadgym.fit.space import parse_fit_specs
     from spreadgym.fit.synthetic import synthetic_tray_test
-    from spreadgym.fit.uncertainty import IDENTIFIABLE_SHARE
+    from spreadgym.fit.uncertainty import determined
     from spreadgym.threads import set_threads
 
     if threads is not None:
@@ -78,8 +76,8 @@ def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: in
                     f"{name}_simulation_sd": float(fit.simulation_sd[j]), f"{name}_model_sd": float(fit.model_sd[j]),
                     f"{name}_bare_low": float(fit.bare_low[j]), f"{name}_bare_high": float(fit.bare_high[j]),
                     f"{name}_bare_covered": bool(fit.bare_low[j] <= value <= fit.bare_high[j]),
-                    f"{name}_bare_identifiable": bool(fit.space.unit(fit.bare_high)[j] - fit.space.unit(fit.bare_low)[j]
-                                                      <= IDENTIFIABLE_SHARE)})
+                    f"{name}_bare_identifiable": determined(fit.space.unit(fit.bare_low)[j],
+                                                            fit.space.unit(fit.bare_high)[j])})
     row.update({"truth_model": truth_model, "discrepancy_points": fit.discrepancy_points, "catch_sd": fit.catch_sd,
                 "trays": fit.model.trays, "evaluations": fit.model.evaluations, "fit_wall_s": fit.wall_s})
     return row

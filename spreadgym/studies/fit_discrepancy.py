@@ -52,7 +52,7 @@ def fit_discrepancy_rows(path: Path = discrepancy.STORED, points: int = POINTS,
                          cache: Optional[Path] = None, progress: Optional[Callable[[str], None]] = None) -> list[dict]:
     """Measure every scene x fertilizer x rotation at `points` calibration points on `workers`
     processes; write `path`; the rows."""
-    calibration = discrepancy.calibration_points(search_ranges(), points)
+    calibration = discrepancy.sobol_points(search_ranges(), points)
     jobs = [(s, f, r, i, p, granules, cache) for s, f, r in product(SCENES, FERTILIZERS, ROTATIONS)
             for i, p in enumerate(calibration)]
     rows: list[dict] = []
