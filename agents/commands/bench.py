@@ -249,13 +249,10 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
     mixed settings. Each figure is the median of `repeats` blocks of `batch` designs, with
     the blocks' range; the series' blocks are interleaved so that a shared machine's load
     falls on all of them alike. Ratios are to the one-by-one figure at one thread."""
-    import statistics
-    import time
-
     import gymnasium as gym
 
     from spreadgym import threads
-    from spreadgym.studies.benchmarks import batch_series
+    from spreadgym.studies.benchmarks import batch_series, interleaved_rates
 
     everything = threads.thread_count()
     venv = gym.make_vec("spreadgym/SpinnerDesign-v0", num_envs=batch, autoreset_mode="same_step")
@@ -270,21 +267,12 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
             env.step(env.action_space.sample())
             env.reset()
 
-    series = {("SpinnerDesign, one env", 1): single_block,
-              (f"SpinnerDesignVectorEnv ({batch})", batch): lambda: venv.step(venv.action_space.sample())}
-    rates: dict = {(name, size, n): [] for name, size in series for n in sorted({1, everything})}
-    for block in range(repeats + 1):  # block 0 warms up (compiles or loads the kernels)
-        for (name, size, n), found in rates.items():
-            threads.set_threads(n)
-            start = time.perf_counter()
-            series[name, size]()
-            if block:
-                found.append(batch / (time.perf_counter() - start))
-    threads.set_threads(None)
+    ways = {("SpinnerDesign, one env", 1): single_block,
+            (f"SpinnerDesignVectorEnv ({batch})", batch): lambda: venv.step(venv.action_space.sample())}
+    rows, _ = interleaved_rates({(name, size, n): run for (name, size), run in ways.items()
+                                 for n in sorted({1, everything})}, batch, repeats)
     venv.close()
     env.close()
-    rows = [{"what": name, "batch": size, "threads": n, "designs_per_s": statistics.median(r),
-             "designs_per_s_low": min(r), "designs_per_s_high": max(r)} for (name, size, n), r in rates.items()]
     core = batch_series(batch, repeats)
     users = batch_user_rows(batch, repeats)
     for group in [rows, core, *users]:
@@ -303,9 +291,6 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     generation on SpinnerDesign (the population `cma` asks for at the start, stepped as
     one batch by `step_designs`, against one design at a time). Designs per second, median
     of `repeats` interleaved blocks and their range; the block results are checked equal."""
-    import statistics
-    import time
-
     import cma
     import gymnasium as gym
     import numpy as np
@@ -317,6 +302,7 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     from spreadgym.physics.granules import replicate_sizes
     from spreadgym.spread.pipeline import run_scene
     from spreadgym.spread.precision import PooledMasses, reference_precisely
+    from spreadgym.studies.benchmarks import interleaved_rates
 
     everything = threads.thread_count()
     scene = load_scene("paper")
@@ -349,22 +335,12 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     }
     out = []
     for title, (designs, ways) in groups.items():
-        plan = [(way, n) for way in ways for n in ((1,) if way[1] == 1 else sorted({1, everything}))]
-        rates = {(way[0], n): [] for way, n in plan}
-        found = {}
-        for block in range(repeats + 1):  # block 0 warms up
-            for way, n in plan:
-                threads.set_threads(n)
-                start = time.perf_counter()
-                found[way[0], n] = way[2]()
-                if block:
-                    rates[way[0], n].append(designs / (time.perf_counter() - start))
-        threads.set_threads(None)
+        series = {(f"{title}, {name}", size, n): run for name, size, run in ways
+                  for n in ((1,) if size == 1 else sorted({1, everything}))}
+        rows, found = interleaved_rates(series, designs, repeats)
         first, *others = found.values()
         if any(not np.array_equal(np.asarray(first), np.asarray(other)) for other in others):
             raise AssertionError(f"{title}: the batch differs from one at a time")
-        out.append([{"what": f"{title}, {name}", "batch": size, "threads": n,
-                     "designs_per_s": statistics.median(rates[name, n]), "designs_per_s_low": min(rates[name, n]),
-                     "designs_per_s_high": max(rates[name, n])} for (name, size, _), n in plan])
+        out.append(rows)
     env.close()
     return out

@@ -135,6 +135,29 @@ def flight_benchmark(counts=(2000, 20000), repeats: int = 5) -> list[dict]:
     return rows
 
 
+def interleaved_rates(series: dict, designs: int, repeats: int) -> tuple[list[dict], dict]:
+    """Designs per second of each series: `series` maps (what, batch size, threads) to a
+    callable that evaluates `designs` designs. Every block runs each series once, at its own
+    thread count (spreadgym.threads), so a shared machine's load falls on all alike; block 0
+    warms up (compiles or loads the kernels), the next `repeats` are timed. Returns one row
+    per series (median and range) and each series' last result."""
+    from spreadgym import threads
+
+    rates: dict = {key: [] for key in series}
+    found = {}
+    for block in range(repeats + 1):
+        for key, run in series.items():
+            threads.set_threads(key[2])
+            start = time.perf_counter()
+            found[key] = run()
+            if block:
+                rates[key].append(designs / (time.perf_counter() - start))
+    threads.set_threads(None)
+    rows = [{"what": what, "batch": size, "threads": n, "designs_per_s": statistics.median(r),
+             "designs_per_s_low": min(r), "designs_per_s_high": max(r)} for (what, size, n), r in rates.items()]
+    return rows, found
+
+
 def batch_series(batch: int = 64, repeats: int = 5) -> list[dict]:
     """Designs per second of `batch` scenes (paper, field and twin-field in turn, rpm and
     seed varied) run by `run_scene` one by one and by one `run_batch`, at one thread and
@@ -148,23 +171,13 @@ def batch_series(batch: int = 64, repeats: int = 5) -> list[dict]:
     library = load_library()
     bases = [load_scene(name) for name in ("paper", "field", "twin-field")]
     scenes = [scene_with(bases[i % 3], {"sim.seed": i, "spinner.rpm": 450.0 + 5.0 * i}) for i in range(batch)]
-    ways = {"run_scene, one by one": lambda: [run_scene(s, library=library, ci=False) for s in scenes],
-            "run_batch": lambda: run_batch(scenes, library=library, ci=False)}
-    everything = threads.thread_count()
-    rates: dict = {(name, n): [] for name in ways for n in sorted({1, everything})}
-    found = {}
-    for block in range(repeats + 1):  # block 0 warms up
-        for (name, n), kept in rates.items():
-            threads.set_threads(n)
-            start = time.perf_counter()
-            found[name] = ways[name]()
-            if block:
-                kept.append(batch / (time.perf_counter() - start))
-    threads.set_threads(None)
+    one_by_one, together = "run_scene, one by one (paper, field, twin-field)", "run_batch (paper, field, twin-field)"
+    counts = sorted({1, threads.thread_count()})
+    series = {**{(one_by_one, 1, n): lambda: [run_scene(s, library=library, ci=False) for s in scenes] for n in counts},
+              **{(together, batch, n): lambda: run_batch(scenes, library=library, ci=False) for n in counts}}
+    rows, found = interleaved_rates(series, batch, repeats)
     same = all(np.array_equal(a.replicate_masses_kg, b.replicate_masses_kg)
-               for a, b in zip(found["run_scene, one by one"], found["run_batch"]))
+               for a, b in zip(found[one_by_one, 1, counts[-1]], found[together, batch, counts[-1]]))
     if not same:
         raise AssertionError("run_batch differs from run_scene")
-    return [{"what": f"{name} (paper, field, twin-field)", "batch": 1 if "one by one" in name else batch,
-             "threads": n, "designs_per_s": statistics.median(r), "designs_per_s_low": min(r),
-             "designs_per_s_high": max(r)} for (name, n), r in rates.items()]
+    return rows
