@@ -30,9 +30,12 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Optional
 
+import math
+
 import numpy as np
 from scipy.special import stdtrit
 
+from spreadgym.physics.compiled.layout import KERNEL
 from spreadgym.spread import pattern
 
 MIN_REPLICATES_FOR_SE = 3
@@ -49,15 +52,6 @@ class CvEstimate:
     interval_percent: Optional[tuple[float, float]]  # CONFIDENCE_LEVEL, Student t, K - 1 dof
 
 
-def replicate_bouts(replicate_masses: np.ndarray, tray_width_m: float, bout_width_m: float,
-                    driving: str) -> np.ndarray:
-    """(K, n) overlapped bouts of each replicate's tray masses (K, T) on the centred tray row."""
-    masses = np.atleast_2d(np.asarray(replicate_masses, dtype=float))
-    tray_count = masses.shape[1]
-    n = pattern.bout_tray_count(bout_width_m, tray_width_m)
-    return masses @ pattern._fold_matrix(tray_count, n, driving).T
-
-
 def estimate_cv(replicate_masses: np.ndarray, tray_width_m: float, bout_width_m: float,
                 driving: str) -> CvEstimate:
     """Corrected CV, jackknife standard error and plain CV at one bout width.
@@ -65,24 +59,17 @@ def estimate_cv(replicate_masses: np.ndarray, tray_width_m: float, bout_width_m:
     `replicate_masses` (K, T): tray masses of each independent replicate on one row of
     T trays centred on the axis (T odd), as `replicate_tray_masses` returns them.
     """
-    bouts = replicate_bouts(replicate_masses, tray_width_m, bout_width_m, driving)
-    k = bouts.shape[0]
-    raw = float(pattern._cv_rows(bouts.sum(axis=0)))
-    if not np.isfinite(raw):
+    masses = _replicate_rows(replicate_masses)
+    k = masses.shape[0]
+    raw, cv, se, usable = _bout_cvs(masses, pattern.bout_tray_counts([bout_width_m], tray_width_m), driving)
+    if not np.isfinite(raw[0]):
         return CvEstimate(None, None, None, None)
-    if k < 2:
-        return CvEstimate(raw, None, raw, None)
-    keep = ~np.eye(k, dtype=bool)  # row j: every replicate but j
-    leave_one_out = pattern._cv_rows(np.stack([bouts[row].sum(axis=0) for row in keep]))
-    if not np.all(np.isfinite(leave_one_out)):  # a replicate holds all the mass
-        return CvEstimate(raw, None, raw, None)
-    cv = max(0.0, k * raw - (k - 1) * float(leave_one_out.mean()))
-    se = interval = None
-    if k >= MIN_REPLICATES_FOR_SE:
-        se = float(np.sqrt((k - 1) / k * np.sum((leave_one_out - leave_one_out.mean()) ** 2)))
-        half = _t_quantile(k - 1) * se
-        interval = (max(0.0, cv - half), cv + half)
-    return CvEstimate(cv, se, raw, interval)
+    if not usable[0]:  # one replicate, or one holds all the mass: no correction
+        return CvEstimate(float(raw[0]), None, float(raw[0]), None)
+    if k < MIN_REPLICATES_FOR_SE:
+        return CvEstimate(float(cv[0]), None, float(raw[0]), None)
+    half = _t_quantile(k - 1) * float(se[0])
+    return CvEstimate(float(cv[0]), float(se[0]), float(raw[0]), (max(0.0, float(cv[0]) - half), float(cv[0]) + half))
 
 
 @lru_cache(maxsize=None)
@@ -114,39 +101,88 @@ def replicate_tray_masses(x_m: np.ndarray, mass_kg: np.ndarray, replicate: np.nd
 def cv_curve(replicate_masses: np.ndarray, tray_width_m: float, driving: str,
              widths_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Corrected CV (%) and its standard error (NaN where unknown) at every width: the
-    numbers of `estimate_cv` width by width (to rounding), in one pass over all widths."""
-    masses = np.atleast_2d(np.asarray(replicate_masses, dtype=float))
-    k, tray_count = masses.shape
-    counts = np.array([pattern.bout_tray_count(w, tray_width_m) for w in widths_m], dtype=np.int64)
+    numbers of `estimate_cv` width by width, to the bit, in one compiled pass."""
+    masses = _replicate_rows(replicate_masses)
+    counts = pattern.bout_tray_counts(widths_m, tray_width_m)
     if counts.size == 0:
         return np.zeros(0), np.zeros(0)
-    tray, column = pattern.fold_pairs(tray_count, counts, driving)
-    total = int(counts.sum())
-    flat = (np.arange(k)[:, None] * total + column[None, :]).ravel()
-    # (K, sum of n): every width's bout side by side
-    bouts = np.bincount(flat, weights=masses[:, tray].ravel(), minlength=k * total).reshape(k, total)
-    keep = ~np.eye(k, dtype=bool)  # row j: every replicate but j (summed, not subtracted:
-    leave_one_out = keep.astype(float) @ bouts  # a replicate holding all the mass leaves exact zeros)
-    rows = _segment_cv(np.vstack([bouts.sum(axis=0), leave_one_out]), counts)
-    raw, loo = rows[0], rows[1:]
-    cvs, ses = raw.copy(), np.full(raw.shape, np.nan)
-    if k < 2:
-        return cvs, ses
-    usable = np.isfinite(raw) & np.all(np.isfinite(loo), axis=0)
-    mean_loo = loo.mean(axis=0)
-    cvs[usable] = np.maximum(0.0, k * raw[usable] - (k - 1) * mean_loo[usable])
-    if k >= MIN_REPLICATES_FOR_SE:
-        spread = np.sqrt((k - 1) / k * np.sum((loo - mean_loo) ** 2, axis=0))
-        ses[usable] = spread[usable]
-    return cvs, ses
+    raw, cv, se, usable = _bout_cvs(masses, counts, driving)
+    with_se = usable & (masses.shape[0] >= MIN_REPLICATES_FOR_SE)
+    return np.where(usable, cv, raw), np.where(with_se, se, np.nan)
 
 
-def _segment_cv(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """`pattern._cv_rows` of each row's consecutive segments of the given lengths: (R, len(counts))."""
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    mean = np.add.reduceat(values, starts, axis=1) / counts
-    deviation = values - np.repeat(mean, counts, axis=1)
-    spread = np.add.reduceat(deviation * deviation, starts, axis=1)
-    sd = np.sqrt(spread / np.maximum(counts - 1, 1))
-    safe = np.where(mean > 0, mean, 1.0)
-    return np.where(mean > 0, np.where(counts > 1, 100.0 * sd / safe, 0.0), np.nan)
+def _replicate_rows(replicate_masses: np.ndarray) -> np.ndarray:
+    """(K, T) float tray masses, C order, T odd."""
+    masses = np.ascontiguousarray(np.atleast_2d(np.asarray(replicate_masses, dtype=float)))
+    if masses.ndim != 2 or masses.shape[1] % 2 != 1:
+        raise ValueError(f"replicate masses must be (K, T) with T odd, got shape {masses.shape}")
+    return masses
+
+
+def _bout_cvs(masses: np.ndarray, counts: np.ndarray, driving: str) -> tuple:
+    """`bout_cvs` of the bouts of `counts` trays; the fold pairs come from `pattern.fold_pairs`."""
+    pattern._check_driving(driving)
+    tray, column = pattern.fold_pairs_cached(masses.shape[1], tuple(int(n) for n in counts), driving)
+    return bout_cvs(masses, tray, column, counts)
+
+
+@KERNEL
+def bout_cvs(masses, tray, column, counts):
+    """Plain and corrected CV of the overlapped bouts of several widths, from the (K, T)
+    tray masses of K replicates: (raw (W,), corrected (W,), jackknife s.e. (W,), usable
+    (W,) bool), W = counts.size.
+
+    Bout j has counts[j] trays, the bouts side by side (bout j starts at column
+    sum(counts[:j])); tray `tray[p]` adds its mass to column `column[p]`
+    (`pattern.fold_pairs`). raw: `pattern.row_cv` of the pooled bout; with K >= 2, the
+    leave-one-out CVs c_i (every replicate but i, summed, not subtracted, so a replicate
+    holding all the mass leaves exact zeros) give corrected = max(0, K raw - (K - 1)
+    mean c) and s.e. = sqrt((K - 1) / K sum (c_i - mean c)^2). usable: raw and every c_i
+    finite, K >= 2 (else corrected and s.e. are NaN). Compiled and GIL-free: a batch
+    scores its runs side by side on threads."""
+    k = masses.shape[0]
+    total = 0
+    widest = 0
+    for j in range(counts.size):
+        total += counts[j]
+        widest = max(widest, counts[j])
+    bouts = np.zeros((k, total))
+    for p in range(tray.size):
+        for r in range(k):
+            bouts[r, column[p]] += masses[r, tray[p]]
+    raw = np.full(counts.size, np.nan)
+    cv = np.full(counts.size, np.nan)
+    se = np.full(counts.size, np.nan)
+    usable = np.zeros(counts.size, dtype=np.bool_)
+    row = np.empty(widest)
+    loo = np.empty(k)
+    start = 0
+    for j in range(counts.size):
+        n = counts[j]
+        for q in range(n):
+            row[q] = 0.0
+            for r in range(k):
+                row[q] += bouts[r, start + q]
+        raw[j] = pattern.row_cv(row[:n])
+        finite = k >= 2 and math.isfinite(raw[j])
+        for i in range(k if finite else 0):
+            for q in range(n):
+                row[q] = 0.0
+                for r in range(k):
+                    if r != i:
+                        row[q] += bouts[r, start + q]
+            loo[i] = pattern.row_cv(row[:n])
+            finite = finite and math.isfinite(loo[i])
+        if finite:
+            mean = 0.0
+            for i in range(k):
+                mean += loo[i]
+            mean /= k
+            spread = 0.0
+            for i in range(k):
+                spread += (loo[i] - mean) * (loo[i] - mean)
+            cv[j] = max(0.0, k * raw[j] - (k - 1) * mean)
+            se[j] = math.sqrt((k - 1) / k * spread)
+            usable[j] = True
+        start += n
+    return raw, cv, se, usable

@@ -41,9 +41,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Optional, Sequence
 
+import math
+from functools import lru_cache
+
 import numpy as np
 
 from spreadgym.errors import ConfigError
+from spreadgym.physics.compiled.layout import KERNEL
 from spreadgym.spread import binning
 
 DRIVING = ("racetrack", "back-and-forth")
@@ -179,6 +183,29 @@ def collect_replicates(x_m, mass_kg, replicate, replicates: int, tray_width_m: f
     return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=pooled, width_m=w), per_replicate, index
 
 
+def bout_tray_counts(widths_m, tray_width_m: float) -> np.ndarray:
+    """`bout_tray_count` of every width in `widths_m` (int64 array), the same check."""
+    w = _check_tray_width(tray_width_m)
+    widths = np.asarray(widths_m, dtype=float).reshape(-1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        ratio = widths / w
+        n = np.where(np.isfinite(ratio), np.rint(ratio), 0.0)
+    bad = (n < 1) | (np.abs(ratio - n) > _GRID_TOL * np.maximum(1.0, ratio)) | ~np.isfinite(ratio)
+    if bad.any():
+        bout_tray_count(widths[np.argmax(bad)], w)  # raises its one-line error
+    return n.astype(np.int64)
+
+
+@lru_cache(maxsize=256)
+def fold_pairs_cached(tray_count: int, counts: tuple, driving: str) -> tuple[np.ndarray, np.ndarray]:
+    """`fold_pairs` for a tuple of counts, computed once per (T, counts, driving): the
+    runs of a batch share their rows and widths. The arrays are read-only."""
+    tray, column = fold_pairs(tray_count, np.asarray(counts, dtype=np.int64), driving)
+    tray, column = np.ascontiguousarray(tray, dtype=np.int64), np.ascontiguousarray(column, dtype=np.int64)
+    tray.flags.writeable = column.flags.writeable = False
+    return tray, column
+
+
 def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.ndarray, np.ndarray]:
     """How a row of T trays (centred on the axis) overlaps into bouts of counts[j] trays,
     the bouts side by side (bout j starts at column sum(counts[:j])): every (tray index
@@ -220,20 +247,29 @@ def bout_pattern(trays: Trays, bout_width_m: float, driving: str) -> np.ndarray:
     return _fold_matrix(trays.count, n, driving) @ trays.mass_kg
 
 
-def _cv_rows(values: np.ndarray) -> np.ndarray:
-    """CV in % of each row of `values` (.., n): ddof = 1; 0 for n = 1; NaN if empty."""
-    n = values.shape[-1]
-    mean = values.mean(axis=-1)
+@KERNEL
+def row_cv(values) -> float:
+    """CV in % of the 1-D `values`: 100 s / mean, s with ddof = 1 (sums in order); 0 for
+    one value; NaN where the mean is not > 0 (no mass). Compiled: the estimate's kernel
+    (`estimate.bout_cvs`) calls it for every bout."""
+    n = values.size
+    total = 0.0
+    for i in range(n):
+        total += values[i]
+    mean = total / n
+    if not mean > 0.0:
+        return math.nan
     if n == 1:
-        return np.where(mean > 0, 0.0, np.nan)
-    sd = values.std(axis=-1, ddof=1)
-    safe = np.where(mean > 0, mean, 1.0)
-    return np.where(mean > 0, 100.0 * sd / safe, np.nan)
+        return 0.0
+    spread = 0.0
+    for i in range(n):
+        spread += (values[i] - mean) * (values[i] - mean)
+    return 100.0 * math.sqrt(spread / (n - 1)) / mean
 
 
 def cv_percent(trays: Trays, bout_width_m: float, driving: str) -> float:
     """Coefficient of variation (%) of the overlapped pattern over one bout."""
-    return float(_cv_rows(bout_pattern(trays, bout_width_m, driving)))
+    return float(row_cv(bout_pattern(trays, bout_width_m, driving)))
 
 
 def default_widths_m(trays: Trays) -> np.ndarray:
