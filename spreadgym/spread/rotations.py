@@ -100,7 +100,7 @@ def copy_turns(granules: GranuleBatch, scene: Scene, copies: int, seed: int, fir
     angles come in antithetic pairs theta0 +- phi (the law is symmetric about the feed
     angle, so each is still a von Mises draw; the pair halves the draws and cancels the
     odd part of the noise). Only cos s and sin s are needed, and
-    `von_mises.antithetic_turns` gives them without forming an angle. `granules` holds the
+    `von_mises.fill_turns` gives them without forming an angle. `granules` holds the
     replicates first_replicate, first_replicate + 1, ... in order (each a consecutive run
     of granules), `granules.replicate` 0, 1, ..."""
     n = granules.count
@@ -115,13 +115,11 @@ def copy_turns(granules: GranuleBatch, scene: Scene, copies: int, seed: int, fir
     to_feed = feed.angle_rad - np.arctan2(xy[:, 1], xy[:, 0])  # the mean of s
     cos_mu, sin_mu = np.cos(to_feed), np.sin(to_feed)
     kappa = r * feed.radius_m / feed.spread_m**2
-    # the replicates are consecutive runs of granules
+    # the replicates are consecutive runs of granules, each with its own stream
     starts = np.flatnonzero(np.diff(granules.replicate, prepend=-1))
-    for start, stop in zip(starts, [*starts[1:], n]):
-        rows = np.arange(start, stop)
-        rng = np.random.default_rng([seed, first_replicate + int(granules.replicate[start]), COPY_STREAM])
-        von_mises.antithetic_turns(rng, kappa[start:stop], cos_mu[start:stop], sin_mu[start:stop], rows, cos_turn,
-                                   sin_turn)
+    stops = np.append(starts[1:], n)
+    seeds = [(seed, first_replicate + int(granules.replicate[start]), COPY_STREAM) for start in starts]
+    von_mises.fill_turns(seeds, starts, stops, kappa, cos_mu, sin_mu, cos_turn, sin_turn)
     # a point pulled back by the clip keeps its angle (s = 0)
     held = np.flatnonzero(pulled_back_by_clip(xy, scene))
     if held.size:
