@@ -32,6 +32,8 @@ from scipy.special import ndtr, ndtri
 
 from spreadgym.config.materials import Fertilizer
 from spreadgym.config.scene import Scene
+from spreadgym.physics.compiled import pcg64
+from spreadgym.physics.compiled.options import KERNEL
 
 
 @dataclass(frozen=True)
@@ -93,30 +95,43 @@ def replicate_uniforms(seed: int, replicates: np.ndarray, count: int, sampler: s
 
     Replicate r is seeded by (seed, r) alone. Counts that are not a power of two take the
     first points of the sequence: still an unbiased sample, only less balanced."""
-    rngs = [np.random.default_rng([seed, int(r)]) for r in np.atleast_1d(replicates)]
+    seeds = [(seed, int(r)) for r in np.atleast_1d(replicates)]
     if sampler == "mc":
-        return np.stack([rng.random((count, len(INPUTS))) for rng in rngs])
-    u = _scrambled_sobol(rngs, count, len(INPUTS))
+        return np.stack([np.random.default_rng(s).random((count, len(INPUTS))) for s in seeds])
+    u = _scrambled_sobol(seeds, count, len(INPUTS))
     return np.clip(u, 1e-12, 1.0 - 1e-12)  # the inverse normal CDF needs (0, 1)
 
 
-def _scrambled_sobol(rngs: list, count: int, dims: int) -> np.ndarray:
-    """(len(rngs), count, dims): the first `count` points of `qmc.Sobol(dims, scramble=True,
-    seed=rng)` for each rng, bit for bit (tested), for all of them in one pass.
+def _scrambled_sobol(seeds: list, count: int, dims: int) -> np.ndarray:
+    """(len(seeds), count, dims): the first `count` points of `qmc.Sobol(dims, scramble=True,
+    seed=np.random.default_rng(seed))` for each seed, bit for bit (tested), all in one pass.
 
     The same steps as scipy's engine without its per-engine set-up: the engine draws from
-    a child of the generator, first the digital shift (dims, bits), then a random lower
-    unit-triangular matrix per dimension (left linear matrix scramble: each direction
-    number, most significant bit first, is multiplied by it over GF(2)); point i is the
-    shift XOR the scrambled direction numbers picked by the Gray code of i. The draws are
-    numpy's; the bit arithmetic is compiled (`_sobol_points`)."""
-    shifts = np.empty((len(rngs), dims, SOBOL_BITS), dtype=np.uint32)
-    lower = np.empty((len(rngs), dims, SOBOL_BITS, SOBOL_BITS), dtype=np.uint32)
-    for i, rng in enumerate(rngs):
-        child = rng.spawn(1)[0]
-        shifts[i] = child.integers(0, 2, size=(dims, SOBOL_BITS), dtype=np.uint32)
-        lower[i] = child.integers(0, 2, size=(dims, SOBOL_BITS, SOBOL_BITS), dtype=np.uint32)
+    the generator's first spawned child, first the digital shift (dims, bits), then a
+    random lower unit-triangular matrix per dimension (left linear matrix scramble: each
+    direction number, most significant bit first, is multiplied by it over GF(2)); point i
+    is the shift XOR the scrambled direction numbers picked by the Gray code of i. The
+    draws are numpy's, made in compiled code from the child's state (`pcg64`); the bit
+    arithmetic is compiled too (`_sobol_points`)."""
+    shifts, lower = _scramble_bits(pcg64.seeded(seeds, spawned=True), dims, SOBOL_BITS)
     return _sobol_points(shifts, lower, _direction_numbers(dims), count)
+
+
+@KERNEL
+def _scramble_bits(states, dims, bits):
+    """Each state's `integers(0, 2, size=(dims, bits))` then `integers(0, 2, size=(dims,
+    bits, bits))`, as uint32 (R, dims, bits) and (R, dims, bits, bits)."""
+    shifts = np.empty((states.shape[0], dims, bits), dtype=np.uint32)
+    lower = np.empty((states.shape[0], dims, bits, bits), dtype=np.uint32)
+    for r in range(states.shape[0]):
+        for d in range(dims):
+            for b in range(bits):
+                shifts[r, d, b] = pcg64.next_bit(states[r])
+        for d in range(dims):
+            for p in range(bits):
+                for b in range(bits):
+                    lower[r, d, p, b] = pcg64.next_bit(states[r])
+    return shifts, lower
 
 
 @njit(cache=True, nogil=True)

@@ -47,7 +47,7 @@ import math
 
 import numpy as np
 
-from spreadgym.physics.compiled.layout import INLINED, KERNEL
+from spreadgym.physics.compiled.options import INLINED, KERNEL
 from spreadgym.physics.constants import SPHERE_INERTIA_FACTOR
 
 STOKES_TORQUE_RE_R = 32.0  # Re_R where C_R switches from 64 pi / Re_R to the Dennis et al. fit

@@ -94,7 +94,7 @@ SPINNER_MODELS: dict[str, SpinnerModel] = {m.name: m for m in (
                  "the full model: drop, disc bounces and drag, impulse contacts with the vanes"),
     SpinnerModel("spring-damper", "spreadgym.physics.stepped.spring_damper:simulate_spring_damper", "pymunk",
                  "the seed paper's spring-dashpot vane contact with the measured contact time"),
-    SpinnerModel("compiled", "spreadgym.physics.compiled:simulate_compiled", "pymunk",
+    SpinnerModel("compiled", "spreadgym.physics.compiled.model:simulate_compiled", "pymunk",
                  "the pymunk model's contact laws per granule, event-driven and compiled with numba",
                  batch_runner="spreadgym.physics.compiled.model:simulate_compiled_batch"),
 )}

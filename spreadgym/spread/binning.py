@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from spreadgym.physics.compiled.layout import KERNEL
+from spreadgym.physics.compiled.options import KERNEL
 
 OK, BAD_POSITION, BAD_MASS, TOO_WIDE, BAD_REPLICATE = range(5)
 """What `bin_landings` found: binned, a landing point not finite, a mass not finite or

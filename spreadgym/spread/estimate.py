@@ -35,7 +35,7 @@ import math
 import numpy as np
 from scipy.special import stdtrit
 
-from spreadgym.physics.compiled.layout import KERNEL
+from spreadgym.physics.compiled.options import KERNEL
 from spreadgym.spread import pattern
 
 MIN_REPLICATES_FOR_SE = 3

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from spreadgym.physics import magnus
-from spreadgym.physics.compiled.layout import INLINED, KERNEL
+from spreadgym.physics.compiled.options import INLINED, KERNEL
 
 # The helpers are INLINED: they run per stage, and a call (with its array reference
 # counting) cost about as much as their arithmetic.

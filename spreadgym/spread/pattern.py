@@ -47,7 +47,7 @@ from functools import lru_cache
 import numpy as np
 
 from spreadgym.errors import ConfigError
-from spreadgym.physics.compiled.layout import KERNEL
+from spreadgym.physics.compiled.options import KERNEL
 from spreadgym.spread import binning
 
 DRIVING = ("racetrack", "back-and-forth")

@@ -49,7 +49,7 @@ from typing import Sequence
 import numpy as np
 
 from spreadgym.config.scene import Deflector, Flight, Scene
-from spreadgym.physics.compiled.layout import KERNEL
+from spreadgym.physics.compiled.options import KERNEL
 from spreadgym.physics.constants import GRAVITY_M_S2
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.geometry import advance_to_circle, zone_radius_m

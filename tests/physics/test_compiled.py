@@ -8,7 +8,8 @@ from scipy.integrate import solve_ivp
 
 from spreadgym.config.scene import load_scene
 from spreadgym.physics.analytic.spinner import simulate_analytic
-from spreadgym.physics.compiled import granule_run, layout, simulate_compiled
+from spreadgym.physics.compiled import granule_run, layout
+from spreadgym.physics.compiled.model import simulate_compiled
 from spreadgym.physics.departure import DEPARTED, RETAINED_TIMEOUT
 
 G = 9.81

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from spreadgym.physics.compiled.layout import INLINED
+from spreadgym.physics.compiled.options import INLINED
 
 SPEED_FLOOR_M_S = 1e-12
 """Below this relative speed the disc drag is static (it balances the other forces up to mu_d g)."""

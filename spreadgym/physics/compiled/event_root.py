@@ -4,7 +4,7 @@ where it is not (the contact phase)."""
 
 from __future__ import annotations
 
-from spreadgym.physics.compiled.layout import KERNEL
+from spreadgym.physics.compiled.options import KERNEL
 
 MAX_ITERATIONS = 40  # guard only: the Illinois iteration converges superlinearly (order ~1.44)
 FRACTION_TOLERANCE = 1e-10  # the event time to this fraction of the step (~1e-13 s)

@@ -21,9 +21,7 @@ from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, illinois_step
 from spreadgym.physics.compiled.layout import (
     DISC_RADIUS,
     GRAVITY,
-    INLINED,
     INV_KAPPA,
-    KERNEL,
     MU_DISC,
     MU_VANE,
     NX,
@@ -34,6 +32,7 @@ from spreadgym.physics.compiled.layout import (
     UX,
     UY,
 )
+from spreadgym.physics.compiled.options import INLINED, KERNEL
 
 NONE = 0
 LEAVE_NORMAL = 1  # N reached 0

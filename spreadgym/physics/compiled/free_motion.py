@@ -16,7 +16,8 @@ import math
 
 from spreadgym.physics.compiled.contact_law import free_acceleration
 from spreadgym.physics.compiled.event_root import MAX_ITERATIONS, newton_step
-from spreadgym.physics.compiled.layout import DISC_RADIUS, INLINED, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
+from spreadgym.physics.compiled.layout import DISC_RADIUS, LENGTH, NX, NY, OMEGA, PX, PY, UX, UY
+from spreadgym.physics.compiled.options import INLINED
 
 NONE = 0
 RIM = 1

@@ -37,9 +37,7 @@ from spreadgym.physics.compiled.layout import (
     E_VANE,
     GRAVITY,
     HALF_THICKNESS,
-    INLINED,
     INV_KAPPA,
-    KERNEL,
     LENGTH,
     MU_DISC,
     MU_VANE,
@@ -47,7 +45,6 @@ from spreadgym.physics.compiled.layout import (
     NY,
     OMEGA,
     OVERLAP_RATE,
-    PARALLEL,
     REBOUND_FLIGHT,
     SETTLE_SPEED,
     STEP,
@@ -55,6 +52,7 @@ from spreadgym.physics.compiled.layout import (
     TIME_LIMIT,
     VANE_TOP,
 )
+from spreadgym.physics.compiled.options import INLINED, KERNEL, PARALLEL
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, RETAINED_TIMEOUT
 
 MAX_LOOPS = 200_000  # guard: a granule still looping after this many events counts as timed out

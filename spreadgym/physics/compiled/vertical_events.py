@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from spreadgym.physics.compiled.layout import INLINED
+from spreadgym.physics.compiled.options import INLINED
 
 NO_EVENT = 0
 DISC_IMPACT = 1
