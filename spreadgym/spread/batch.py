@@ -23,7 +23,6 @@ a device backend.
 from __future__ import annotations
 
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from typing import Optional, Sequence, Union
 
@@ -32,7 +31,7 @@ from spreadgym.config.scene import Scene
 from spreadgym.errors import ConfigError
 from spreadgym.physics.selection import SPINNER_MODELS
 from spreadgym.spread.pipeline import SimulationResult, finish_scene, plan_scene
-from spreadgym.threads import thread_count
+from spreadgym.threads import thread_map
 
 
 def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[MaterialLibrary] = None,
@@ -51,7 +50,6 @@ def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[Ma
     if not scenes:
         return []
     library = library or load_library()
-    threads = min(thread_count(), len(scenes))
     # planning is small numpy work that holds the GIL throughout: threads would only take turns
     plans = [plan_scene(scene, model, library, first) for scene, first in zip(scenes, firsts)]
     departures = [[] for _ in plans]
@@ -61,13 +59,7 @@ def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[Ma
         for owner, departure in zip(owners, SPINNER_MODELS[chosen].run_batch(runs)):
             departures[owner].append(departure)
 
-    def finish(i: int) -> SimulationResult:
-        return finish_scene(plans[i], departures[i], ci)
-    if threads == 1:
-        results = [finish(i) for i in range(len(plans))]
-    else:
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            results = list(pool.map(finish, range(len(plans))))
+    results = thread_map(lambda i: finish_scene(plans[i], departures[i], ci), len(plans))
     wall_s = (time.perf_counter() - started) / len(results)
     for result in results:
         result.metrics = replace(result.metrics, wall_s=wall_s)
