@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+from spreadgym.physics.compiled.options import INLINED, KERNEL
 
 # Outcome codes per granule. Every granule ends with exactly one.
 DEPARTED = 0
@@ -45,11 +48,15 @@ class Departure:
 
     def radial_tangential_m_s(self, omega_rad_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Outward radial and tangential (direction of rotation) velocity of the departed granules."""
-        gone = self.departed
-        pos, vel = self.position_m[gone], self.velocity_m_s[gone]
-        radial_dir = pos / np.hypot(pos[:, 0], pos[:, 1])[:, None]
-        tangent_dir = np.copysign(1.0, omega_rad_s) * np.stack([-radial_dir[:, 1], radial_dir[:, 0]], axis=1)
-        return np.sum(vel * radial_dir, axis=1), np.sum(vel * tangent_dir, axis=1)
+        return _radial_tangential(self.position_m, self.velocity_m_s, self.departed, math.copysign(1.0, omega_rad_s))
+
+    def means(self, omega_rad_s: float) -> tuple[int, float, float, float, float, float]:
+        """(departed count, mean speed, its s.d. (ddof 1; 0 for one granule), mean spin,
+        mean angle from the tangent (deg: 0 tangential, 90 radial, `radial_tangential_m_s`),
+        mean time on the spinner) over the departed granules, in one compiled pass (NaN
+        means where none departed)."""
+        return _means(self.position_m, self.velocity_m_s, self.spin_rad_s, self.time_s, self.departed,
+                      math.copysign(1.0, omega_rad_s))
 
     def outcome_counts(self) -> dict[str, int]:
         return {name: int(np.sum(self.outcome == code)) for code, name in enumerate(OUTCOMES)}
@@ -80,3 +87,49 @@ def tilted_by_cone(departure: Departure, cone_rad: float) -> Departure:
     vertical[gone] = vertical[gone] + v_r * np.sin(cone_rad)
     return replace(departure, velocity_m_s=velocity, vertical_velocity_m_s=vertical,
                    notes=[*departure.notes, f"departures tilted up along a {np.degrees(cone_rad):g} deg cone"])
+
+
+@INLINED
+def _radial_tangential_of(px, py, vx, vy, sign):
+    """Outward radial and tangential (sign +1: counter-clockwise) parts of (vx, vy) at (px, py)."""
+    r = math.hypot(px, py)
+    ux, uy = px / r, py / r
+    return vx * ux + vy * uy, vx * (sign * -uy) + vy * (sign * ux)
+
+
+@KERNEL
+def _radial_tangential(position, velocity, departed, sign):
+    count = 0
+    for i in range(departed.size):
+        count += departed[i]
+    radial, tangential = np.empty(count), np.empty(count)
+    k = 0
+    for i in range(departed.size):
+        if departed[i]:
+            radial[k], tangential[k] = _radial_tangential_of(position[i, 0], position[i, 1], velocity[i, 0],
+                                                             velocity[i, 1], sign)
+            k += 1
+    return radial, tangential
+
+
+@KERNEL
+def _means(position, velocity, spin, time, departed, sign):
+    n = 0
+    speed = spin_sum = angle = time_sum = 0.0
+    for i in range(departed.size):
+        if departed[i]:
+            n += 1
+            speed += math.hypot(velocity[i, 0], velocity[i, 1])
+            spin_sum += spin[i]
+            radial, tangential = _radial_tangential_of(position[i, 0], position[i, 1], velocity[i, 0],
+                                                       velocity[i, 1], sign)
+            angle += math.degrees(math.atan2(radial, tangential))
+            time_sum += time[i]
+    if n == 0:
+        return 0, math.nan, math.nan, math.nan, math.nan, math.nan
+    mean = speed / n
+    spread = 0.0
+    for i in range(departed.size):
+        if departed[i]:
+            spread += (math.hypot(velocity[i, 0], velocity[i, 1]) - mean) ** 2
+    return n, mean, math.sqrt(spread / (n - 1)) if n > 1 else 0.0, spin_sum / n, angle / n, time_sum / n

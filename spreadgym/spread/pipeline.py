@@ -254,19 +254,12 @@ def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
     The departure angle is measured from the disc's tangent at the departure point
     (direction of rotation) towards the outward radial: 0 deg tangential, 90 deg radial.
     """
-    gone = departure.departed
-    if not gone.any():
+    count, speed, speed_sd, spin, angle, time_s = departure.means(omega_rad_s)
+    if not count:
         return {"speed_mean_m_s": None, "speed_std_m_s": None, "spin_mean_rad_s": None,
                 "angle_mean_deg": None, "time_on_spinner_mean_s": None}  # nothing to average
-    angle = np.degrees(np.arctan2(*departure.radial_tangential_m_s(omega_rad_s)))
-    speed = departure.speed_m_s[gone]
-    return {
-        "speed_mean_m_s": float(speed.mean()),
-        "speed_std_m_s": float(speed.std(ddof=1)) if speed.size > 1 else 0.0,
-        "spin_mean_rad_s": float(departure.spin_rad_s[gone].mean()),
-        "angle_mean_deg": float(angle.mean()),
-        "time_on_spinner_mean_s": float(departure.time_s[gone].mean()),
-    }
+    return {"speed_mean_m_s": speed, "speed_std_m_s": speed_sd, "spin_mean_rad_s": spin, "angle_mean_deg": angle,
+            "time_on_spinner_mean_s": time_s}
 
 
 def _notes(scene: Scene, model: str, departure: Departure, launch: Departure, trays: pattern.Trays) -> list[str]:
