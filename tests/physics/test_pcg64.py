@@ -6,7 +6,7 @@ import pytest
 from spreadgym.physics.compiled import pcg64
 from spreadgym.physics.compiled.options import KERNEL
 
-SEEDS = [(0,), (1, 2, 1), (2**63 + 5, 7, 1), (12345, 0)]
+SEEDS = [0, (0,), (1, 2, 1), (2**63 + 5, 7, 1), (12345, 0), 2**100, (3, 4, 5, 6, 7, 8)]  # 1 to 6 entropy words
 RAW, DOUBLE, BIT = range(3)
 
 
@@ -51,3 +51,10 @@ def test_outputs_doubles_and_bits_are_numpys(seed):
     bits, _ = _draws(state, 1001, BIT)  # odd: a 32-bit half stays kept, as numpy keeps it
     assert np.array_equal(bits.astype(np.uint32), rng.integers(0, 2, size=1001, dtype=np.uint32))
     assert np.array_equal(state, state_words(rng))
+
+
+def test_a_negative_seed_is_refused_as_numpy_refuses_it():
+    with pytest.raises(ValueError):
+        np.random.SeedSequence(-1)
+    with pytest.raises(ValueError, match="non-negative"):
+        pcg64.seeded([(1, -1)])

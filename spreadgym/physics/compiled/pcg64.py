@@ -5,9 +5,11 @@ Sobol scrambles) take generators' states as plain integers instead of numpy
 `Generator` objects: numba boxes a Generator through ctypes under the GIL on every
 call, and a batch of runs on threads pays that dozens of times per run. The state
 words follow numpy's PCG64: the 128-bit LCG s = s M + inc mod 2^128 with the XSL-RR
-output rotr64(high(s) ^ low(s), s >> 122), seeded from a SeedSequence as numpy seeds it,
-and 32-bit draws that use both halves of a 64-bit output, low half first. Tested
-against `bit_generator.random_raw`, `Generator.random` and `Generator.integers`.
+output rotr64(high(s) ^ low(s), s >> 122), seeded from a SeedSequence as numpy seeds it
+(its entropy pool's hash mixing, also compiled: numpy's runs in Python-level steps that
+hold the GIL), and 32-bit draws that use both halves of a 64-bit output, low half first.
+Tested against `SeedSequence`, `bit_generator.random_raw`, `Generator.random` and
+`Generator.integers`.
 """
 
 from __future__ import annotations
@@ -25,15 +27,89 @@ MULTIPLIER_HIGH = np.uint64(0x2360ED051FC65DA4)  # the 128-bit LCG multiplier (n
 MULTIPLIER_LOW = np.uint64(0x4385DF649FCCF645)
 
 
+POOL_SIZE = 4  # numpy's SeedSequence pool, 32-bit words
+INIT_A, MULT_A, INIT_B, MULT_B = 0x43B0D7E5, 0x931E8875, 0x8B51F9DD, 0x58F38DED  # its hash constants
+MIX_MULT_L, MIX_MULT_R = 0xCA01F9DD, 0x4973F715
+WORD = 0xFFFFFFFF
+
+
 def seeded(seeds: Sequence, spawned: bool = False) -> np.ndarray:
-    """(R, 6) uint64 states of `np.random.default_rng(seed)` for each seed, or (`spawned`)
-    of that generator's first `spawn(1)` child."""
-    words = np.array([np.random.SeedSequence(seed, spawn_key=(0,) if spawned else ()).generate_state(4, np.uint64)
-                      for seed in seeds], dtype=np.uint64).reshape(-1, 4)
-    return _set_seed(words)
+    """(R, 6) uint64 states of `np.random.default_rng(seed)` for each seed (a non-negative
+    int or a sequence of them), or (`spawned`) of that generator's first `spawn(1)` child."""
+    entropy = [_words(seed) for seed in seeds]
+    if spawned:  # the child's spawn key (0,) follows the run entropy, padded to the pool
+        entropy = [words + [0] * (POOL_SIZE - len(words)) + [0] for words in entropy]
+    table = np.zeros((len(entropy), max((len(w) for w in entropy), default=0)), dtype=np.uint64)
+    for r, words in enumerate(entropy):
+        table[r, :len(words)] = words
+    return _seeded(table, np.array([len(w) for w in entropy], dtype=np.int64))
+
+
+def _words(seed) -> list[int]:
+    """numpy's 32-bit entropy words of an int (least significant first; 0 is one word) or
+    of a sequence of ints (each in turn)."""
+    if isinstance(seed, (int, np.integer)):
+        value = int(seed)
+        if value < 0:
+            raise ValueError(f"seeds must be non-negative, got {value}")
+        words = [value & WORD]
+        while value > WORD:
+            value >>= 32
+            words.append(value & WORD)
+        return words
+    return [word for part in seed for word in _words(part)]
+
+
+@INLINED
+def _hashmix(value, hash_const):
+    """numpy's SeedSequence hashmix on 32-bit words held in uint64; returns (value, hash_const)."""
+    word = np.uint64(WORD)
+    value ^= hash_const
+    hash_const = (hash_const * np.uint64(MULT_A)) & word
+    value = (value * hash_const) & word
+    return value ^ (value >> np.uint64(16)), hash_const
+
+
+@INLINED
+def _mix(x, y):
+    word = np.uint64(WORD)
+    result = ((np.uint64(MIX_MULT_L) * x) - (np.uint64(MIX_MULT_R) * y)) & word
+    return result ^ (result >> np.uint64(16))
 
 
 @KERNEL
+def _seeded(entropy, lengths):
+    """PCG64 states from SeedSequence entropy words (rows of `entropy`, the first
+    lengths[r] used): the pool mixed and four 64-bit words generated as numpy's
+    SeedSequence does, then numpy's `pcg64_set_seed` (state, then increment words)."""
+    word = np.uint64(WORD)
+    words = np.zeros((entropy.shape[0], 4), dtype=np.uint64)
+    pool = np.zeros(POOL_SIZE, dtype=np.uint64)
+    for r in range(entropy.shape[0]):
+        n = lengths[r]
+        hash_const = np.uint64(INIT_A)
+        for i in range(POOL_SIZE):
+            pool[i], hash_const = _hashmix(entropy[r, i] if i < n else np.uint64(0), hash_const)
+        for src in range(POOL_SIZE):
+            for dst in range(POOL_SIZE):
+                if src != dst:
+                    hashed, hash_const = _hashmix(pool[src], hash_const)
+                    pool[dst] = _mix(pool[dst], hashed)
+        for src in range(POOL_SIZE, n):
+            for dst in range(POOL_SIZE):
+                hashed, hash_const = _hashmix(entropy[r, src], hash_const)
+                pool[dst] = _mix(pool[dst], hashed)
+        hash_const = np.uint64(INIT_B)
+        for k in range(8):  # 32-bit words, two to each 64-bit word (little end first)
+            value = pool[k % POOL_SIZE] ^ hash_const
+            hash_const = (hash_const * np.uint64(MULT_B)) & word
+            value = (value * hash_const) & word
+            value ^= value >> np.uint64(16)
+            words[r, k // 2] |= value << np.uint64(32 * (k % 2))
+    return _set_seed(words)
+
+
+@INLINED
 def _set_seed(words):
     """numpy's `pcg64_set_seed` of each row (state high, low, sequence high, low)."""
     states = np.zeros((words.shape[0], 6), dtype=np.uint64)
