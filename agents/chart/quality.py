@@ -61,6 +61,55 @@ def chart_quality(payload: dict) -> dict:
             "pitch_reversals": sum(len(s["pitch"]) for s in steady.values()), "reversals": steady}
 
 
+def search_pick_rows(payload: dict) -> list[dict]:
+    """The chart's rows as the chain left them, before the row sweep: each cell at its search pick, with
+    that point's settings and verified figures (the row's own where the sweep kept the pick, else the
+    `sweep.search_pick_verified` recorded when it moved the cell)."""
+    from spreadgym.agents.chart.spec import Cell, ChartSpec
+
+    spec = ChartSpec(**{k: tuple(v) if k in ("fertilizers", "widths_m") else v for k, v in payload["spec"].items()})
+    out = []
+    for row, cell in zip(payload["rows"], payload["cells"]):
+        block = cell["sweep"] or {}
+        if not block.get("moved"):
+            out.append(dict(row))
+            continue
+        space = spec.space(spec.cell_scene(Cell(row["fertilizer"], row["width_m"])))
+        out.append({**row, **space.values(cell["search_unit_settings"]), **block["search_pick_verified"]})
+    return out
+
+
+def _paired(after: list[float], before: list[float]) -> dict:
+    """Mean paired difference after - before, its standard error over the cells and its range."""
+    import numpy as np
+
+    d = np.subtract(after, before)
+    se = float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else None
+    return {"mean": float(d.mean()), "standard_error": se, "min": float(d.min()), "max": float(d.max())}
+
+
+def sweep_effect(payload: dict) -> dict:
+    """What the row sweep did to a finished chart: the cells it moved, the reversals over the targets'
+    sizes before (at the search picks) and after, and the paired cost in verified nominal CV and p90
+    (after - before, percentage points, over every cell and over the moved ones)."""
+    before_rows = search_pick_rows(payload)
+    before = chart_quality({**payload, "rows": before_rows})
+    after = chart_quality(payload)
+    moved = [i for i, c in enumerate(payload["cells"]) if (c["sweep"] or {}).get("moved")]
+    rows = payload["rows"]
+    out = {"cells": len(rows), "moved": [(rows[i]["fertilizer"], rows[i]["width_m"]) for i in moved],
+           "rpm_reversals": (before["rpm_reversals"], after["rpm_reversals"]),
+           "pitch_reversals": (before["pitch_reversals"], after["pitch_reversals"]),
+           "mean_cv_percent": (before["mean_cv_percent"], after["mean_cv_percent"]),
+           "mean_cv_p90_percent": (before["mean_cv_p90_percent"], after["mean_cv_p90_percent"]),
+           "reversals": (before["reversals"], after["reversals"])}
+    for key in ("cv_percent", "cv_p90_percent"):
+        out[f"{key}_cost"] = _paired([r[key] for r in rows], [r[key] for r in before_rows])
+        if moved:
+            out[f"{key}_cost_moved"] = _paired([rows[i][key] for i in moved], [before_rows[i][key] for i in moved])
+    return out
+
+
 QUALITY_CHARTS = (  # as measured in docs/charts.md (small); the issue's full charts are 3:6:0.5 and 4:12:1
     ("paper", "3:6:1", "cmaes", None),
     ("field", "4:12:4", "cmaes", None),

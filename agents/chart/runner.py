@@ -10,7 +10,10 @@ address, Ray's start), and a refused run leaves the folder as it was.
 Cells of one fertilizer (a row) run in width order, each started from its narrower
 neighbour's settings (`search.run_cell`); rows run side by side. Each finished cell is
 written to the chart folder as it arrives, with its pattern picture; a rerun skips the
-cells already there. Ctrl-C cancels the running tasks and
+cells already there. Once a row's cells are all there, the row sweep (`sweep_rows`,
+`agents.chart.sweep`) picks one tied point per cell for the whole row; a cell moved off
+its search pick is verified again there (Ray tasks side by side) and every cell file is
+rewritten with what the sweep did. Ctrl-C cancels the running tasks and
 stops, keeping every finished cell. The chart files (chart.csv, .json, .md, .png) are
 written only when every cell is done, so nothing half-done reads as a chart.
 """
@@ -26,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
-from spreadgym.agents.chart import outputs
+from spreadgym.agents.chart import outputs, sweep
 from spreadgym.agents.chart.search import run_cell
 from spreadgym.agents.chart.spec import Cell, ChartSpec, make_spec
 from spreadgym.agents.chart.store import ChartStore
@@ -164,6 +167,7 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
     try:
         store.open()  # the first write: every refusal came before it
         _run_cells(spec, store, todo, engine, records, computed, progress, on_cell)
+        sweep_rows(spec, store, records, remote=engine == "ray")
         ordered = [records[c.key] for c in spec.cells]
         for cell, record in zip(spec.cells, ordered):
             if not store.picture_ok(cell):  # interrupted before its picture, or the picture damaged
@@ -175,6 +179,55 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
 
             ray.shutdown()
     return ChartResult(spec, payload, files, computed, reused, replaced, time.perf_counter() - started)
+
+
+def swept_with_picture(spec: ChartSpec, cell: Cell, record: dict, pick: int, before: int,
+                       after: int) -> tuple[dict, Optional[bytes]]:
+    """The cell's record after the row sweep, and its picture when the sweep re-verified it (else None)."""
+    swept = sweep.swept_record(spec, cell, record, pick, before, after)
+    moved = swept["detail"]["unit_settings"] != record["detail"]["unit_settings"]
+    return swept, outputs.cell_picture(spec, cell, swept) if moved else None
+
+
+def sweep_rows(spec: ChartSpec, store: ChartStore, records: dict, remote: bool = False) -> None:
+    """The row sweep (`agents.chart.sweep`) over every row whose cells are all in `records`: each cell's
+    pick among its tie set, a cell moved off the point it is verified at verified again (`remote`: as Ray
+    tasks if Ray is running, else here), every cell's file rewritten with what the sweep did."""
+    jobs = []
+    for fertilizer in spec.fertilizers:
+        cells = [c for c in spec.cells if c.fertilizer == fertilizer]
+        if not all(c.key in records for c in cells):
+            continue
+        details = [records[c.key]["detail"] for c in cells]
+        points = sweep.row_points([spec.space(spec.cell_scene(c)) for c in cells], [d["tie_set"] for d in details])
+        picks = sweep.steadiest(points)
+        before = sweep.row_turns(points, [d["tie_set"]["search_pick"] for d in details])
+        after = sweep.row_turns(points, picks)
+        jobs += [(cell, pick, before, after) for cell, pick in zip(cells, picks)
+                 if (records[cell.key]["detail"]["sweep"] or {}).get("pick") != pick
+                 or sweep.current_pick(records[cell.key]["detail"]) != pick
+                 or records[cell.key]["detail"]["sweep"]["row_reversals_swept"] != after]
+    # a cell that keeps the point it is verified at only gets its sweep block: no task for it
+    verify = [job for job in jobs if sweep.current_pick(records[job[0].key]["detail"]) != job[1]]
+    results = {cell.key: swept_with_picture(spec, cell, records[cell.key], *rest)
+               for cell, *rest in jobs if (cell, *rest) not in verify}
+    if verify and remote:
+        import ray
+
+        remote = ray.is_initialized()  # a chart whose cells were all found finished starts no Ray
+    if verify and remote:
+        task = ray.remote(num_cpus=1)(swept_with_picture)
+        spec_ref = ray.put(spec)
+        refs = [task.remote(spec_ref, cell, records[cell.key], *rest) for cell, *rest in verify]
+        results.update({cell.key: result for (cell, *_), result in zip(verify, ray.get(refs))})
+    else:
+        results.update({cell.key: swept_with_picture(spec, cell, records[cell.key], *rest) for cell, *rest in verify})
+    for cell, *_ in jobs:
+        record, picture = results[cell.key]
+        store.save(cell, record)
+        if picture is not None:
+            outputs.cell_figure(store, cell, record, picture)
+        records[cell.key] = record
 
 
 def _run_cells(spec: ChartSpec, store: ChartStore, todo: Sequence[Cell], engine: str, records: dict,

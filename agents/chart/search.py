@@ -18,14 +18,18 @@ nominal scene and over the variability model.
 * Search: CMA-ES over the settings box (`agents.baselines.cmaes_search`), started at the
   narrower neighbour's settings (the first width: the scene's own; `policy+search`: the
   policy's proposal). The search gets 1 - RESCORE_FRACTION of the budget (candidates);
-  the rest re-scores its leaders, and the neighbour's settings, in rounds: each round
-  scores every leader on the same fresh samples (robust: a fresh set of draws).
-* Steady rows: among the leaders whose mean re-scored score is within two standard
-  errors (of the best leader's mean, from the spread of its rounds) of the best, the one
-  closest to the narrower neighbour's settings (in the unit box) wins. What the search
-  believes (`cv_search_percent`, the CV of its objective) rests on the re-scores only.
+  the rest re-scores its leaders, the neighbour's settings and the policy's proposal, in
+  rounds (fewer leaders where that leaves each point 2 rounds): each round scores every
+  point on the same fresh samples (robust: a fresh set of draws).
+* Steady rows: the leaders whose mean re-scored score is within two standard errors (of
+  the best leader's mean, from the spread of its rounds) of the best are the cell's tie
+  set; the one closest to the narrower neighbour's settings (in the unit box) is the
+  search pick, where the next width starts. The row sweep (`agents.chart.sweep`) later
+  picks one point of each tie set for the whole row. What the search believes
+  (`cv_search_percent`, the CV of its objective) rests on the re-scores only.
 * `policy`: no search; the policy's proposal is the cell's settings.
-* Verification: the winner run `verify_runs` times on the full model and pooled
+* Verification (`verified_record`; also of a point the row sweep moves a cell to): the
+  settings run `verify_runs` times on the full model and pooled
   (`spread.reference`), so `cv_percent` and `cv_standard_error_percent` rest on
   verify_runs x granules granules in as many replicates; and run once on each of
   `verify_draws` fresh draws of the variability model on the full model: their
@@ -111,8 +115,10 @@ class Scorer:
         return var.quantile(costs, self.quantile), var.quantile(cvs, self.quantile)
 
 
-def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np.ndarray], cma_seed: int) -> dict:
-    """CMA-ES from `x0`, then the leaders (and `neighbour`) re-scored in rounds; the pick by the tie rule."""
+def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np.ndarray], cma_seed: int,
+           proposal: Optional[np.ndarray] = None) -> dict:
+    """CMA-ES from `x0`, then the leaders (and `neighbour`, and the policy's `proposal`) re-scored in rounds;
+    the pick by the tie rule, and the tie set (every re-scored point tied with the best) for the row sweep."""
     spec = scorer.spec
     count = iter(range(spec.budget))
     nominal = spec.objective == "nominal"
@@ -128,14 +134,17 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
     search_budget, _ = split_budget(spec.budget)
     result = cmaes_search(evaluate, scorer.space.size, search_budget, seed=cma_seed, sigma0=sigma0, x0=x0)
     rescore_budget = spec.budget - result.evaluations
-    kept = leaders(result, max(1, min(LEADERS, rescore_budget // 2)))
-    if neighbour is not None and not any(np.array_equal(neighbour, x) for x in kept):
-        kept.append(neighbour)
+    extras = [x for x in (neighbour, proposal) if x is not None]
+    kept = leaders(result, max(1, min(LEADERS, rescore_budget // 2 - len(extras))))
+    for extra in extras:
+        if not any(np.array_equal(extra, x) for x in kept):
+            kept.append(extra)
     rounds = rescore_budget // len(kept)
     if rounds < 2:  # too small a budget to re-score: the belief is the search's own best evaluation
         i = int(np.argmax(result.history))
+        point = tie_point(result.best_x, -float(result.history[i]), search_cvs[i], None)
         return {"x": result.best_x, "cv": search_cvs[i], "cv_se": None, "rounds": 0, "ties": 1,
-                "evaluations": result.evaluations}
+                "evaluations": result.evaluations, "tie_set": tie_set([point], 0, 0, None)}
     scores = np.zeros((len(kept), rounds, 2))
     for r in range(rounds):
         cell_draws = None if nominal else scorer.round_draws(r)
@@ -148,9 +157,22 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
     ties = [i for i in range(len(kept)) if means[i] <= means[best] + TIE_STANDARD_ERRORS * best_se]
     pick = best if neighbour is None else min(ties, key=lambda i: (float(np.linalg.norm(kept[i] - neighbour)),
                                                                    means[i]))
-    cvs = scores[pick, :, 1]
-    return {"x": kept[pick], "cv": float(cvs.mean()), "cv_se": float(cvs.std(ddof=1) / math.sqrt(rounds)),
-            "rounds": rounds, "ties": len(ties), "evaluations": result.evaluations + rounds * len(kept)}
+    cv_se = [float(scores[i, :, 1].std(ddof=1) / math.sqrt(rounds)) for i in range(len(kept))]
+    points = [tie_point(kept[i], float(means[i]), float(scores[i, :, 1].mean()), cv_se[i]) for i in ties]
+    return {"x": kept[pick], "cv": float(scores[pick, :, 1].mean()), "cv_se": cv_se[pick],
+            "rounds": rounds, "ties": len(ties), "evaluations": result.evaluations + rounds * len(kept),
+            "tie_set": tie_set(points, ties.index(best), ties.index(pick), best_se)}
+
+
+def tie_point(x: np.ndarray, score: Optional[float], cv: Optional[float], cv_se: Optional[float]) -> dict:
+    """One point of a cell's tie set: its unit settings, mean score and search CV (robust: p90) with its SE."""
+    return {"unit_settings": [float(v) for v in x], "score_percent": score, "cv_search_percent": cv,
+            "cv_search_standard_error_percent": cv_se}
+
+
+def tie_set(points: list[dict], best: int, pick: int, best_se: Optional[float]) -> dict:
+    """The points tied with the best (`best`: its index; `search_pick`: the chain's pick, by the nearness rule)."""
+    return {"points": points, "best": best, "search_pick": pick, "best_standard_error_percent": best_se}
 
 
 def verify_p90(spec: ChartSpec, cell: Cell, scene, settings: dict, seq: np.random.SeedSequence) -> dict:
@@ -173,53 +195,63 @@ def verify_p90(spec: ChartSpec, cell: Cell, scene, settings: dict, seq: np.rando
 
 def run_cell(spec: ChartSpec, cell: Cell, previous: Optional[dict] = None) -> dict:
     """Search and verify one cell; `previous` is the record of the narrower neighbour
-    (`spec.previous(cell)`, None for the first width). Returns {"row": the chart row, "detail": the rest}."""
+    (`spec.previous(cell)`, None for the first width). Returns {"row": the chart row, "detail": the rest}.
+    The chain runs on the search's own picks (`search_unit_settings`), never on what a row sweep made of
+    them, so a cell is the same whether its neighbour was swept yet or not."""
     started = time.perf_counter()
-    library = load_library()
-    scorer_seq, cma_seq, verify_seq, p90_seq, policy_seq = cell_seed(spec.seed, cell).spawn(5)
+    scorer_seq, cma_seq, _, _, policy_seq = cell_seed(spec.seed, cell).spawn(5)
     scorer = Scorer(spec, cell, scorer_seq)
     scene, space = scorer.scene, scorer.space
-    neighbour = None if previous is None else np.asarray(previous["detail"]["unit_settings"], dtype=float)
+    neighbour = None if previous is None else np.asarray(previous["detail"]["search_unit_settings"], dtype=float)
     proposal = None
     if spec.method != "cmaes":
         from spreadgym.agents.chart.policy import propose
 
         proposal = propose(spec, cell, policy_seq)
     if spec.method == "policy":
-        found = {"x": proposal, "cv": None, "cv_se": None, "rounds": 0, "ties": 1, "evaluations": 0}
+        found = {"x": proposal, "cv": None, "cv_se": None, "rounds": 0, "ties": 1, "evaluations": 0,
+                 "tie_set": tie_set([tie_point(proposal, None, None, None)], 0, 0, None)}
     else:
         x0 = proposal if proposal is not None else (neighbour if neighbour is not None else space.scene_unit(scene))
         warm = proposal is not None or neighbour is not None
         found = search(scorer, x0, WARM_SIGMA if warm else CMA_SIGMA0, neighbour,
-                       int(cma_seq.generate_state(1)[0]) % CMA_SEED_RANGE)
+                       int(cma_seq.generate_state(1)[0]) % CMA_SEED_RANGE, proposal)
     best_x = np.asarray(found["x"], dtype=float)
-    settings = space.overrides(best_x)
+    detail = {"key": cell.key, "search_unit_settings": [float(v) for v in best_x], "objective": spec.objective,
+              "method": spec.method, "search_evaluations": found["evaluations"], "rescores": found["rounds"],
+              "ties": found["ties"], "tie_set": found["tie_set"], "sweep": None}
+    return verified_record(spec, cell, best_x, found["cv"], found["cv_se"], scorer.simulations, detail, started)
+
+
+def verified_record(spec: ChartSpec, cell: Cell, x: np.ndarray, cv_search: Optional[float],
+                    cv_search_se: Optional[float], search_simulations: int, detail: dict, started: float) -> dict:
+    """The cell's record with settings `x` verified on the full model (nominal, pooled, and the p90), on the
+    cell's own verification seeds: whatever settings a cell ends with are verified alike."""
+    _, _, verify_seq, p90_seq, _ = cell_seed(spec.seed, cell).spawn(5)
+    scene = spec.cell_scene(cell)
+    space = spec.space(scene)
+    settings = space.overrides(x)
     verify_scene = scene_with(scene, settings | {"sim.seed": int(verify_seq.generate_state(1)[0])})
-    pooled = pool_runs(verify_scene, spec.verify_runs, model=spec.verify_model, library=library)
+    pooled = pool_runs(verify_scene, spec.verify_runs, model=spec.verify_model, library=load_library())
     reference = reference_from(verify_scene, pooled)
     cv, cv_se = reference.at_target.cv_percent, reference.at_target.standard_error_percent
     p90 = verify_p90(spec, cell, scene, settings, p90_seq)
     verified, verified_se = (cv, cv_se) if spec.objective == "nominal" else (p90["cv_percent"],
                                                                              p90["standard_error_percent"])
     agree = None
-    if verified is not None and verified_se is not None and found["cv_se"] is not None:
-        agree = abs(verified - found["cv"]) <= 2.0 * math.hypot(verified_se, found["cv_se"])
+    if verified is not None and verified_se is not None and cv_search_se is not None:
+        agree = abs(verified - cv_search) <= 2.0 * math.hypot(verified_se, cv_search_se)
     row = {"fertilizer": cell.fertilizer, "width_m": cell.width_m, "driving": spec.driving,
-           **space.values(best_x),
+           **space.values(x),
            "cv_percent": cv, "cv_standard_error_percent": cv_se,
            "cv_p90_percent": p90["cv_percent"], "cv_p90_standard_error_percent": p90["standard_error_percent"],
-           "effective_swath_m": reference.effective_swath_m, "cv_search_percent": found["cv"],
-           "simulations": scorer.simulations + spec.verify_runs + p90["draws"] * p90["runs_per_draw"],
+           "effective_swath_m": reference.effective_swath_m, "cv_search_percent": cv_search,
+           "simulations": search_simulations + spec.verify_runs + p90["draws"] * p90["runs_per_draw"],
            "wall_s": time.perf_counter() - started}
     detail = {
-        "key": cell.key,
-        "unit_settings": [float(v) for v in best_x],
-        "objective": spec.objective,
-        "method": spec.method,
-        "cv_search_standard_error_percent": found["cv_se"],
-        "search_evaluations": found["evaluations"],
-        "rescores": found["rounds"],
-        "ties": found["ties"],
+        **detail,
+        "unit_settings": [float(v) for v in x],
+        "cv_search_standard_error_percent": cv_search_se,
         "search_agrees_within_2se": agree,
         "meets_threshold": cv is not None and cv <= scene.pattern.cv_threshold_percent,
         "verification": {"model": pooled.model, "granules": pooled.granules, "replicates": pooled.replicates,

@@ -93,8 +93,9 @@ class ChartSpec:
 
     @property
     def max_simulations(self) -> int:
-        """Most simulations a cell may make: the search's and the verification's."""
-        return self.budget * self.draws + self.verify_simulations
+        """Most simulations a cell may make: the search's and the verification's, twice when the row sweep
+        moved the cell to another tied point (verified again)."""
+        return self.budget * self.draws + 2 * self.verify_simulations
 
     def manifest(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}

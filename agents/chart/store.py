@@ -33,9 +33,9 @@ CHART_FILES = ("chart.csv", "chart.json", "chart.md", "chart.png", "chart.html")
 HEAD = ["fertilizer", "width_m", "driving"]  # a row: the cell, its settings (units in their names), the results
 TAIL = ["cv_percent", "cv_standard_error_percent", "cv_p90_percent", "cv_p90_standard_error_percent",
         "effective_swath_m", "cv_search_percent", "simulations", "wall_s"]
-DETAIL = {"key", "unit_settings", "objective", "method", "cv_search_standard_error_percent", "search_evaluations",
-          "rescores", "ties", "search_agrees_within_2se", "meets_threshold", "verification", "verification_p90",
-          "trays", "cv_curve"}
+DETAIL = {"key", "unit_settings", "search_unit_settings", "objective", "method", "cv_search_standard_error_percent",
+          "search_evaluations", "rescores", "ties", "tie_set", "sweep", "search_agrees_within_2se", "meets_threshold",
+          "verification", "verification_p90", "trays", "cv_curve"}
 PNG_START, PNG_END = b"\x89PNG\r\n\x1a\n", b"IEND\xaeB`\x82"
 
 
@@ -189,6 +189,26 @@ def _reals(values: Any, low: float = -math.inf) -> bool:
     return isinstance(values, list) and all(_real(v, low) for v in values)
 
 
+def _tie_problem(detail: dict, size: int) -> Optional[str]:
+    """Why the record's tie set and sweep block are not whole, or None."""
+    tie, swept = detail["tie_set"], detail["sweep"]
+    points = tie.get("points") if isinstance(tie, dict) else None
+    if not (isinstance(points, list) and points and all(
+            isinstance(p, dict) and _reals(p.get("unit_settings")) and len(p["unit_settings"]) == size
+            and all(-1.0 <= u <= 1.0 for u in p["unit_settings"]) for p in points)):
+        return "its tie set is not recorded"
+    if not all(isinstance(tie.get(k), int) and 0 <= tie[k] < len(points) for k in ("best", "search_pick")):
+        return "its tie set's best or search pick is not one of its points"
+    if detail["search_unit_settings"] != points[tie["search_pick"]]["unit_settings"]:
+        return "its search pick is not in its tie set"
+    at = swept.get("pick") if isinstance(swept, dict) else tie["search_pick"]
+    if swept is not None and not (isinstance(at, int) and 0 <= at < len(points)):
+        return "its sweep is not recorded"
+    if detail["unit_settings"] != points[at]["unit_settings"]:
+        return "its settings are not its pick's"
+    return None
+
+
 def record_problem(spec: ChartSpec, cell: Cell, record: Any) -> Optional[str]:
     """Why `record` is not a finished record of `cell` in `spec`, or None when it is."""
     if not (isinstance(record, dict) and set(record) == {"row", "detail"} and isinstance(record["row"], dict)
@@ -206,6 +226,9 @@ def record_problem(spec: ChartSpec, cell: Cell, record: Any) -> Optional[str]:
         return "its unit settings are not in the box"
     if space.values(unit) != {name: row[name] for name in space.names}:
         return "its settings do not match its unit settings"
+    problem = _tie_problem(detail, space.size)
+    if problem:
+        return problem
     optional = ("cv_percent", "cv_standard_error_percent", "cv_p90_standard_error_percent", "cv_search_percent")
     if not all(row[k] is None or _real(row[k], 0.0) for k in optional):
         return "a CV is not a finite number >= 0"

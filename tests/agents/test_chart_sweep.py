@@ -1,0 +1,214 @@
+"""The row sweep (agents/chart/sweep.py): the dynamic programme against a hand-made tie set
+with a known steadiest path and against brute force, a row without ties keeping its best,
+and a chart whose sweep moves a cell verifying the moved cell as a fresh verification
+would, deterministically and on resume."""
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from spreadgym.agents.chart import make_spec, run_chart
+from spreadgym.agents.chart.quality import chart_quality
+from spreadgym.agents.chart.search import verified_record
+from spreadgym.agents.chart.store import record_problem
+from spreadgym.agents.chart.sweep import Point, row_turns, steadiest, step
+
+FERTILIZER = "compound-10-16-10"
+
+
+def point(rpm, pitch, excess=0.0):
+    """A point whose unit settings are its dial values scaled into the box."""
+    return Point(((rpm - 650.0) / 450.0, pitch / 30.0), {"rpm": float(rpm), "pitch_deg": float(pitch)}, excess)
+
+
+def movement(row, picks):
+    return sum(step(row[k - 1][picks[k - 1]], row[k][picks[k]]) for k in range(1, len(row)))
+
+
+def brute_force(row):
+    """The lexicographic minimum (reversals, movement, excess, indices) over every path."""
+    def key(path):
+        return (row_turns(row, path), movement(row, path), sum(row[k][i].excess for k, i in enumerate(path)), path)
+
+    return list(min(itertools.product(*[range(len(cell)) for cell in row]), key=key))
+
+
+def nearest_neighbour_chain(row):
+    """The greedy chain of the search: the best first, then the tied point nearest the previous pick."""
+    picks = [0]
+    for cell in row[1:]:
+        picks.append(min(range(len(cell)), key=lambda i: step(row[len(picks) - 1][picks[-1]], cell[i])))
+    return picks
+
+
+def test_the_sweep_undoes_a_turn_the_greedy_chain_takes():
+    # 3 m: one point. 3.5 m: the best at 820 rpm, a tied point at 700. 4 m: only 700 rpm, 4.5 m: only 800.
+    # The chain takes 3.5 m's point nearest 3 m (820), then must fall to 700 and climb to 800: a turn at
+    # 4 m of 100 rpm (14 %) that the chain cannot undo. Through the tied 700 rpm the row falls and climbs
+    # once, with no turn (a flat step is no turn).
+    row = [[point(800, 10)],
+           [point(820, 10), point(700, 10, 0.3)],
+           [point(700, 10)],
+           [point(800, 10)]]
+    greedy = nearest_neighbour_chain(row)
+    assert greedy == [0, 0, 0, 0] and row_turns(row, greedy) == 1
+    picks = steadiest(row)
+    assert picks == [0, 1, 0, 0] and row_turns(row, picks) == 0
+    rows = [{"fertilizer": "f", "width_m": 3 + k / 2, "cv_percent": 1.0, "cv_p90_percent": 1.0, **row[k][i].values}
+            for k, i in enumerate(picks)]
+    assert chart_quality({"rows": rows})["rpm_reversals"] == 0  # what the sweep minimises is what quality counts
+    greedy_rows = [{**r, **row[k][i].values} for k, (r, i) in enumerate(zip(rows, greedy))]
+    assert chart_quality({"rows": greedy_rows})["rpm_reversals"] == 1
+
+
+def test_pitch_turns_count_in_degrees_and_small_turns_do_not_count():
+    # a 2-degree wiggle is under the target's 3 degrees: the sweep keeps the best (least movement says so too)
+    row = [[point(800, 10)], [point(800, 12), point(800, 10, 0.5)], [point(800, 10)]]
+    assert row_turns(row, [0, 0, 0]) == 0
+    assert steadiest(row) == [0, 1, 0]  # the flat path moves less: tied points go to the steadier row
+    # a 4-degree turn counts; the tied 5-degree point removes it
+    row = [[point(800, 10)], [point(800, 14), point(800, 5, 0.5)], [point(800, 0)]]
+    assert row_turns(row, [0, 0, 0]) == 1 and steadiest(row) == [0, 1, 0]
+    # rpm: 5 % of the turning width's rpm (1000 -> 1040 -> 1000 is 3.8 %: not a reversal; 1000 -> 1060 is)
+    assert row_turns([[point(1000, 0)], [point(1040, 0)], [point(1000, 0)]], [0, 0, 0]) == 0
+    assert row_turns([[point(1000, 0)], [point(1060, 0)], [point(1000, 0)]], [0, 0, 0]) == 1
+
+
+def test_a_row_without_ties_keeps_its_best_and_a_lone_cell_its_best():
+    row = [[point(600, 5)], [point(1000, -10)], [point(500, 20)], [point(1100, 0)]]  # zigzag, no choice
+    assert steadiest(row) == [0, 0, 0, 0]
+    assert steadiest([[point(900, 3, 0.4), point(500, 0, 0.0), point(700, 1, 0.2)]]) == [1]
+    with pytest.raises(ValueError):
+        steadiest([[point(800, 0)], []])
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_dynamic_programme_finds_the_brute_force_optimum(seed):
+    rng = np.random.default_rng(seed)
+    row = [[point(rng.uniform(400, 1100), rng.uniform(-20, 20), 0.0 if i == 0 else rng.uniform(0, 1))
+            for i in range(rng.integers(1, 4))] for _ in range(rng.integers(2, 7))]
+    picks = steadiest(row)
+    assert picks == brute_force(row)
+    assert steadiest(row) == picks  # the same tie sets, the same picks
+
+
+SMALL = dict(budget=24, granules=64, search_model="analytic", verify_runs=2,
+             variability={"draws": 4, "verify_draws": 4})
+
+
+@pytest.fixture(scope="module")
+def chart(tmp_path_factory):
+    """Two widths whose sweep moves the 3 m cell off its search pick (seed 1: the 3 m cell ties 3 points, the
+    3.5 m cell 1; the tied point nearest the 3.5 m settings makes the row's step smaller)."""
+    out = tmp_path_factory.mktemp("chart")
+    spec = make_spec("paper", FERTILIZER, "3,3.5", seed=1, **SMALL)[0]
+    return spec, out, run_chart(spec, out, engine="local", progress=False)
+
+
+def _records(out, spec):
+    return {c.key: json.loads((out / "cells" / f"{c.key}.json").read_text(encoding="utf-8")) for c in spec.cells}
+
+
+def _figures(record):
+    return {k: record["row"][k] for k in ("rpm", "pitch_deg", "cv_percent", "cv_standard_error_percent",
+                                          "cv_p90_percent", "cv_p90_standard_error_percent", "effective_swath_m")}
+
+
+def test_every_cell_records_its_tie_set_and_what_the_sweep_did(chart):
+    spec, out, result = chart
+    records = _records(out, spec)
+    for c, cell in zip(spec.cells, result.payload["cells"]):
+        record = records[c.key]
+        tie, block = cell["tie_set"], cell["sweep"]
+        assert record["detail"]["sweep"] == block and record_problem(spec, c, record) is None
+        assert cell["search_unit_settings"] == tie["points"][tie["search_pick"]]["unit_settings"]
+        assert cell["unit_settings"] == tie["points"][block["pick"]]["unit_settings"]
+        assert block["moved"] == (block["pick"] != tie["search_pick"])
+        assert len(tie["points"]) == cell["ties"] >= 1
+        best = tie["points"][tie["best"]]["score_percent"]
+        assert all(p["score_percent"] <= best + 2.0 * tie["best_standard_error_percent"] + 1e-12 for p in tie["points"])
+    moved = [cell["sweep"]["moved"] for cell in result.payload["cells"]]
+    assert moved == [True, False]
+
+
+def test_a_moved_cell_is_verified_at_its_pick_and_the_sweep_is_idempotent(chart):
+    """The moved cell's row is a fresh verification of its pick on the cell's own seeds; the search pick's
+    verified figures are kept beside it; sweeping again (a resumed chart) changes nothing."""
+    from spreadgym.agents.chart.runner import sweep_rows
+    from spreadgym.agents.chart.store import ChartStore
+
+    spec, out, result = chart
+    records = _records(out, spec)
+    cell = spec.cells[0]
+    moved = records[cell.key]
+    tie, block = moved["detail"]["tie_set"], moved["detail"]["sweep"]
+    pick, search_pick = tie["points"][block["pick"]], tie["points"][tie["search_pick"]]
+    fresh = verified_record(spec, cell, np.asarray(pick["unit_settings"]), 0.0, None, 0, {}, 0.0)
+    assert _figures(moved) == _figures(fresh)
+    assert moved["row"]["cv_search_percent"] == pick["cv_search_percent"]
+    before = verified_record(spec, cell, np.asarray(search_pick["unit_settings"]), 0.0, None, 0, {}, 0.0)
+    kept = block["search_pick_verified"]
+    assert {k: kept[k] for k in ("cv_percent", "cv_p90_percent", "effective_swath_m")} == \
+        {k: before["row"][k] for k in ("cv_percent", "cv_p90_percent", "effective_swath_m")}
+    assert kept["cv_search_percent"] == search_pick["cv_search_percent"]
+    # the search's candidates, then two verifications (the search pick's and the pick's)
+    assert moved["row"]["simulations"] == moved["detail"]["search_evaluations"] * 4 + 2 * spec.verify_simulations
+    again = json.loads(json.dumps(records))
+    sweep_rows(spec, ChartStore(out, spec), records)
+    assert json.loads(json.dumps(records)) == again
+    wrong = json.loads(json.dumps(moved))
+    wrong["detail"]["sweep"]["pick"] = tie["search_pick"]
+    assert record_problem(spec, cell, wrong) == "its settings are not its pick's"
+
+
+def test_the_chain_follows_the_search_picks_not_the_swept_ones(chart, tmp_path):
+    """The 3.5 m cell recomputed after the 3 m cell was swept starts from the 3 m cell's search pick (not
+    from where the sweep moved it): the same chart as the fresh run."""
+    import shutil
+
+    spec, out, result = chart
+    folder = tmp_path / "r"
+    shutil.copytree(out, folder)
+    (folder / "cells" / f"{spec.cells[1].key}.json").unlink()
+    again = run_chart(spec, folder, engine="local", progress=False)
+    assert again.computed == [spec.cells[1].key]
+
+    def without_wall(rows):
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+
+    assert without_wall(again.payload["rows"]) == without_wall(result.payload["rows"])
+    assert [c["sweep"] for c in again.payload["cells"]] == [c["sweep"] for c in result.payload["cells"]]
+
+
+def test_the_sweep_effect_reads_the_chart_before_the_sweep_back(chart):
+    from spreadgym.agents.chart.quality import search_pick_rows, sweep_effect
+
+    spec, out, result = chart
+    payload = result.payload
+    before = search_pick_rows(payload)
+    moved_cell, kept_cell = payload["cells"]
+    space = spec.space(spec.cell_scene(spec.cells[0]))
+    assert {k: before[0][k] for k in space.names} == space.values(moved_cell["search_unit_settings"])
+    assert {k: before[0][k] for k in space.names} != {k: payload["rows"][0][k] for k in space.names}
+    assert before[0]["cv_p90_percent"] == moved_cell["sweep"]["search_pick_verified"]["cv_p90_percent"]
+    assert before[1] == payload["rows"][1]  # a cell the sweep kept reads the same
+    effect = sweep_effect(payload)
+    assert effect["moved"] == [(FERTILIZER, 3.0)]
+    step = payload["rows"][0]["cv_p90_percent"] - before[0]["cv_p90_percent"]
+    assert effect["cv_p90_percent_cost"]["mean"] == pytest.approx(step / 2)
+    assert effect["cv_p90_percent_cost_moved"]["mean"] == pytest.approx(step)
+
+
+def test_the_same_spec_gives_the_same_swept_chart_on_ray(chart, tmp_path):
+    """The sweep's re-verification as a Ray task (one worker) gives the rows of the in-process chart."""
+    spec, _, result = chart
+    on_ray = run_chart(spec, tmp_path / "ray", engine="ray", workers=1, progress=False)
+
+    def without_wall(rows):
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+
+    assert without_wall(on_ray.payload["rows"]) == without_wall(result.payload["rows"])
+    assert [c["sweep"] for c in on_ray.payload["cells"]] == [c["sweep"] for c in result.payload["cells"]]
+    assert on_ray.payload["cells"][0]["sweep"]["moved"]
