@@ -231,12 +231,14 @@ def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, lib
 
     def add_runs(count: int) -> Optional[float]:
         """Runs pool.runs .. + count, side by side (spread.batch: the same bits as one by one),
-        in batches that hold at most MAX_GRANULE_COPIES landing points; run 0 keeps `tracks` paths."""
+        in batches of even size that hold at most MAX_GRANULE_COPIES landing points (64 paper
+        runs: 32 + 32, not 61 + 3, which left a core idle); run 0 keeps `tracks` paths."""
         todo = list(range(pool.runs, pool.runs + count))
         if todo[0] == 0 and tracks:
             add(run_scene(scene, model=model, library=library, ci=False, tracks=tracks))
             todo = todo[1:]
-        per_batch = max(1, MAX_GRANULE_COPIES // granule_copies(scene))
+        most = max(1, MAX_GRANULE_COPIES // granule_copies(scene))
+        per_batch = -(-len(todo) // -(-len(todo) // most)) if todo else 1  # even batches: none left with a few runs
         for start in range(0, len(todo), per_batch):
             chunk = todo[start:start + per_batch]
             for result in run_batch([scene] * len(chunk), model=model, library=library, ci=False,
