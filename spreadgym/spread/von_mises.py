@@ -7,16 +7,17 @@ trigonometry after it is two more passes. This kernel runs numpy's algorithm (Be
 Fisher's wrapped-Cauchy rejection, with numpy's limits: a uniform angle below kappa =
 1e-8, a normal one above 1e6) on the same stream: it steps numpy's PCG64 itself from
 the generator's state (spreadgym.physics.compiled.pcg64), consuming its uniforms in the
-same order. The accepted W of
-the rejection step is cos(phi) itself, and sin(phi) = +-sqrt(1 - W^2) with numpy's sign
-draw, so no arccos is taken; the mean is added by the angle-sum formulas. With mean 0,
-sign(sin) * arccos(cos) is numpy's angle for the same generator, to rounding (tested).
+same order. The accepted W of the rejection step is cos(phi) itself, and sin(phi) =
++-sqrt(1 - W^2) with numpy's sign draw, so no arccos is taken; the mean is added by the
+angle-sum formulas. With mean 0, sign(sin) * arccos(cos) is numpy's angle for the same
+generator, to rounding (tested).
 
-A kernel that takes the generators' states as plain integers instead of generator
-objects is called once per run for all its replicates and releases the GIL for all of
-it (a batch finishes runs side by side on threads). Above kappa = 1e6 numpy draws a normal (its ziggurat), which this
-kernel does not reproduce: such a replicate (a feed spot under 0.1 mm) is drawn by
-numpy's `vonmises` itself, its cosines and sines then taken in numpy.
+The kernel takes the generators' states as plain integers instead of generator objects,
+so it is called once per run for all its replicates and releases the GIL for all of it
+(a batch finishes runs side by side on threads). Above kappa = 1e6 numpy draws a normal
+(its ziggurat), which the kernel does not reproduce: a replicate with such a granule (a
+feed spot under about 0.1 mm) is drawn by numpy's `vonmises` itself, its cosines and
+sines then taken in numpy.
 """
 
 from __future__ import annotations
