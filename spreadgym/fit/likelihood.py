@@ -29,6 +29,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from spreadgym.config.scene import Scene, scene_with
+from spreadgym.fit.regime import rolling
 from spreadgym.fit.space import FitSpace
 from spreadgym.fit.trays import TrayTest
 from spreadgym.spread.batch import run_batch
@@ -46,12 +47,13 @@ class Prediction:
     variance: np.ndarray  # (n,) v_sim + v_count, relative (log scale)
     replicate_kg: np.ndarray  # (K, n) each independent replicate's share of the simulated mass
     floor_kg: float  # added to every tray's mass (half a landing sample)
+    rolling: np.ndarray  # (N,) bool: each simulated granule left its disc rolling (regime.rolling)
 
     def leave_out(self, k: int) -> "Prediction":
         """The prediction from every replicate but `k` (rescaled to all K), same variances."""
         count = self.replicate_kg.shape[0]
         kept = (self.replicate_kg.sum(axis=0) - self.replicate_kg[k]) * count / (count - 1)
-        return Prediction(np.log(kept + self.floor_kg), self.variance, self.replicate_kg, self.floor_kg)
+        return Prediction(np.log(kept + self.floor_kg), self.variance, self.replicate_kg, self.floor_kg, self.rolling)
 
 
 class PatternModel:
@@ -108,7 +110,7 @@ class PatternModel:
         masses = result.granules.mass_kg
         granule_kg = float(np.sum(masses ** 2) / np.sum(masses))  # mass-weighted mean granule mass
         v_count = granule_kg / self.test.mass_kg[self.rows]
-        return Prediction(np.log(mu), v_sim + v_count, per, floor)
+        return Prediction(np.log(mu), v_sim + v_count, per, floor, rolling(result))
 
 
 def soft_tray_masses(x_m: np.ndarray, mass_kg: np.ndarray, replicate: np.ndarray, replicates: int,

@@ -101,6 +101,7 @@ def payload(fit: FitResult, prediction: Prediction, scene_path: Optional[Path]) 
         "search_ranges": {k: [float(lo), float(hi)] for k, lo, hi in zip(keys, fit.space.low, fit.space.high)},
         "interval_reaches_search_bound": {k: list(ends) for k, ends in zip(keys, fit.open_ends)},
         "identifiable": dict(fit.identifiable),
+        "regime_switch": {k: float(v) for k, v in zip(keys, fit.regime_switch)},
         "trade_offs": trade_offs,
         "correlation": {k: {k2: float(corr[i, j]) for j, k2 in enumerate(keys)} for i, k in enumerate(keys)},
         "weakest_direction": dict(fit.weakest),

@@ -13,6 +13,7 @@ from spreadgym.errors import SpreadgymError
 from spreadgym.fit import optimise, uncertainty
 from spreadgym.fit.discrepancy import Discrepancy, stored_discrepancy
 from spreadgym.fit.likelihood import PatternModel, residuals
+from spreadgym.fit.regime import VANE_FRICTION
 from spreadgym.fit.space import FitSpace
 from spreadgym.fit.trays import TrayTest
 from spreadgym.physics.selection import choose_model
@@ -44,6 +45,9 @@ class FitResult:
     model_sd: np.ndarray  # (d,) its s.d. from the fit model's discrepancy from the full model, key units
     bare_low: np.ndarray  # (d,) the 90 % interval without the model's discrepancy (to measure what it adds)
     bare_high: np.ndarray
+    regime_switch: np.ndarray  # (d,) share of the granules the vane friction turns between sliding and rolling
+    # inside each interval (uncertainty.regime_switches)
+    bare_regime_switch: np.ndarray  # (d,) the same inside the intervals without the model's discrepancy
     discrepancy_points: int  # calibration points behind model_sd (0: none carried)
     log_scale: float  # a: fitted mass = exp(a) x simulated mass
     cost: float  # sum of squared standardised residuals at the estimate
@@ -102,10 +106,13 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
                       for j, i in enumerate(intervals)))
     bare_low, bare_high = zip(*(uncertainty.widened(best.unit[j], i.low, i.high, [(sim_sd[j], replicates - 1)])
                                 for j, i in enumerate(intervals)))
+    friction = space.keys.index(VANE_FRICTION) if VANE_FRICTION in space.keys else None
+    switch = uncertainty.regime_switches(objective, intervals, low, high, friction)
+    bare_switch = uncertainty.regime_switches(objective, intervals, bare_low, bare_high, friction)
     points = [p for i in intervals for p in (i.low_point, i.high_point)]
     open_ends = [(bool(i.low_open or lo == 0.0), bool(i.high_open or hi == 1.0))
                  for i, lo, hi in zip(intervals, low, high)]
-    identifiable = {key: uncertainty.determined(lo, hi) for key, lo, hi in zip(space.keys, low, high)}
+    identifiable = {key: uncertainty.determined(lo, hi, s) for key, lo, hi, s in zip(space.keys, low, high, switch)}
     direction, eigenvalue = uncertainty.weakest_direction(info)
     _, log_scale = residuals(pattern_model.log_mass, pattern_model.predict([best.unit])[0], objective.sigma)
     return FitResult(
@@ -115,6 +122,6 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
         weakest={k: float(v) for k, v in zip(space.keys, direction)}, weakest_eigenvalue=float(eigenvalue),
         catch_sd=objective.sigma, simulation_sd=sim_sd * (space.high - space.low),
         model_sd=model_sd * (space.high - space.low), bare_low=space.values(np.array(bare_low)),
-        bare_high=space.values(np.array(bare_high)),
+        bare_high=space.values(np.array(bare_high)), regime_switch=switch, bare_regime_switch=bare_switch,
         discrepancy_points=calibration_points, log_scale=log_scale, cost=best.cost, threshold=level,
         wall_s=time.perf_counter() - started)

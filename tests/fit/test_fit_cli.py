@@ -15,13 +15,14 @@ KEY = "contact.vane_restitution"
 
 
 def _trays(tmp_path):
-    scene = load_scene("paper")
+    scene = load_scene("paper", {"granule.rotation": "locked"})
     test = synthetic_tray_test(scene, {KEY: 0.5}, model="compiled", granules=4096, noise_seed=3)
     return str(write_trays(tmp_path / "trays.csv", test, "synthetic, restitution 0.5"))
 
 
 def _fit(capsys, *extra):
-    assert main(["fit", *extra, "--fit", f"{KEY}=0.3:0.7", "--granules", "1024", "--json"]) == 0
+    assert main(["fit", *extra, "--set", "granule.rotation=locked", "--fit", f"{KEY}=0.3:0.7", "--granules", "1024",
+                 "--json"]) == 0
     return json.loads(capsys.readouterr().out)
 
 
@@ -32,13 +33,14 @@ def test_fit_writes_a_scene_simulate_reads(tmp_path, capsys):
     estimate = data["parameters"][KEY]
     assert estimate["low"] <= 0.5 <= estimate["high"] and estimate["low"] < estimate["estimate"] < estimate["high"]
     assert data["identifiable"] == {KEY: True}
+    assert data["regime_switch"] == {KEY: 0.0}  # locked rotation: no granule rolls
     assert 0.0 < data["cv_percent_at_target"] < 100.0
     assert data["scene_yaml"] == str(out / "scene.yaml")
     for name in ("fit.json", "parameters.csv", "pattern.csv", "cv_curve.csv", "fit.png"):
         assert (out / name).stat().st_size > 0
     assert json.loads((out / "fit.json").read_text())["parameters"] == data["parameters"]
     fitted = load_scene(data["scene_yaml"])
-    assert fitted == load_scene("paper", {KEY: estimate["estimate"]})
+    assert fitted == load_scene("paper", {"granule.rotation": "locked", KEY: estimate["estimate"]})
     assert yaml.safe_load((out / "scene.yaml").read_text())["contact"]["vane_restitution"] == estimate["estimate"]
     assert main(["simulate", "--scene", data["scene_yaml"], "--json", "--max-runs", "2"]) == 0
     simulated = json.loads(capsys.readouterr().out)
