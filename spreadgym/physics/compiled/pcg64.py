@@ -39,25 +39,28 @@ def seeded(seeds: Sequence, spawned: bool = False) -> np.ndarray:
     entropy = [_words(seed) for seed in seeds]
     if spawned:  # the child's spawn key (0,) follows the run entropy, padded to the pool
         entropy = [words + [0] * (POOL_SIZE - len(words)) + [0] for words in entropy]
-    table = np.zeros((len(entropy), max((len(w) for w in entropy), default=0)), dtype=np.uint64)
-    for r, words in enumerate(entropy):
-        table[r, :len(words)] = words
-    return _seeded(table, np.array([len(w) for w in entropy], dtype=np.int64))
+    lengths = [len(words) for words in entropy]
+    width = max(lengths, default=0)
+    table = np.array([words + [0] * (width - len(words)) for words in entropy], dtype=np.uint64).reshape(-1, width)
+    return _seeded(table, np.array(lengths, dtype=np.int64))
 
 
 def _words(seed) -> list[int]:
     """numpy's 32-bit entropy words of an int (least significant first; 0 is one word) or
-    of a sequence of ints (each in turn)."""
-    if isinstance(seed, (int, np.integer)):
-        value = int(seed)
+    of a sequence of them (each in turn)."""
+    words = []
+    for part in (seed,) if isinstance(seed, (int, np.integer)) else seed:
+        if not isinstance(part, (int, np.integer)):
+            words += _words(part)
+            continue
+        value = int(part)
         if value < 0:
             raise ValueError(f"seeds must be non-negative, got {value}")
-        words = [value & WORD]
+        words.append(value & WORD)
         while value > WORD:
             value >>= 32
             words.append(value & WORD)
-        return words
-    return [word for part in seed for word in _words(part)]
+    return words
 
 
 @INLINED
