@@ -25,6 +25,8 @@ from typing import Callable, Optional
 import numpy as np
 from scipy.stats import beta
 
+from spreadgym.fit.synthetic import CATCH_SD
+
 SCENES = ("paper", "field")
 FERTILIZERS = ("compound-10-16-10", "pellet")
 ROTATIONS = ("locked", "free")
@@ -48,9 +50,9 @@ def cases(tests: int, seed: int = 0) -> list[dict]:
 
 
 def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: int, threads: Optional[int],
-             cache: Optional[Path] = None) -> dict:
-    """One synthetic test, fitted; a flat row of the results. The truth's simulated pass is
-    read from / kept in `cache` when given."""
+             cache: Optional[Path] = None, catch_sd: float = CATCH_SD) -> dict:
+    """One synthetic test (catch noise `catch_sd`, log s.d.), fitted; a flat row of the
+    results. The truth's simulated pass is read from / kept in `cache` when given."""
     from spreadgym.config.scene import load_scene, scene_with
     from spreadgym.fit.run import fit_tray_test
     from spreadgym.fit.space import parse_fit_specs
@@ -63,7 +65,7 @@ def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: in
     scene = load_scene(case["scene"], {"fertilizer": case["fertilizer"], "granule.rotation": case["rotation"]})
     fitted = scene_with(scene, {"sim.seed": case["test"]})  # each test its own draw of the fit's granules
     test = synthetic_tray_test(scene, case["truth"], model=truth_model, granules=truth_granules,
-                               noise_seed=case["test"], cache=cache)
+                               noise_seed=case["test"], catch_sd=catch_sd, cache=cache)
     fit = fit_tray_test(fitted, parse_fit_specs([SEARCH], scene), test, granules=fit_granules, seed=case["test"])
     row = {key: case[key] for key in ("test", "scene", "fertilizer", "rotation")}
     for j, key in enumerate(fit.space.keys):
@@ -89,26 +91,28 @@ def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: in
 def fit_bench_rows(out: Path, tests: int = 40, workers: int = 1, truth_model: str = "pymunk",
                    truth_granules: int = 16384, fit_granules: int = 4096,
                    progress: Optional[Callable[[str], None]] = None,
-                   cache: Optional[Path] = TRUTH_CACHE) -> list[dict]:
-    """Run `tests` synthetic tests on `workers` processes (each with cores / workers threads);
-    write `out`/fit.md (the summary against the targets); the rows, one per test. The truths'
-    simulated passes are kept in `cache` (None: not kept), so a re-fit does not simulate them again."""
+                   cache: Optional[Path] = TRUTH_CACHE, catch_sd: float = CATCH_SD) -> list[dict]:
+    """Run `tests` synthetic tests (catch noise `catch_sd`, log s.d.) on `workers` processes
+    (each with cores / workers threads); write `out`/fit.md (the summary against the
+    targets); the rows, one per test. The truths' simulated passes are kept in `cache`
+    (None: not kept), so a re-fit does not simulate them again."""
     todo = cases(tests)
     threads = max(1, len(os.sched_getaffinity(0)) // workers)
     rows = []
     if workers == 1:
         for case in todo:
-            rows.append(run_case(case, truth_model, truth_granules, fit_granules, threads, cache))
+            rows.append(run_case(case, truth_model, truth_granules, fit_granules, threads, cache, catch_sd))
             _say(progress, rows[-1])
     else:
         with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(run_case, c, truth_model, truth_granules, fit_granules, threads, cache)
+            futures = [pool.submit(run_case, c, truth_model, truth_granules, fit_granules, threads, cache, catch_sd)
                        for c in todo]
             for future in futures:
                 rows.append(future.result())
                 _say(progress, rows[-1])
     out.mkdir(parents=True, exist_ok=True)
-    (out / "fit.md").write_text(fit_markdown(rows, fit_granules, truth_granules, workers, threads), encoding="utf-8")
+    (out / "fit.md").write_text(fit_markdown(rows, fit_granules, truth_granules, workers, threads, catch_sd),
+                                encoding="utf-8")
     return rows
 
 
@@ -130,14 +134,15 @@ def _share(hits: int, n: int) -> str:
     return f"{100 * hits / n:.0f} % ({hits}/{n}; 95 % CI {100 * lo:.0f}-{100 * hi:.0f} %)"
 
 
-def fit_markdown(rows: list[dict], fit_granules: int, truth_granules: int, workers: int, threads: int) -> str:
+def fit_markdown(rows: list[dict], fit_granules: int, truth_granules: int, workers: int, threads: int,
+                 catch_sd: float = CATCH_SD) -> str:
     """The summary table of a fit bench against the issue's targets."""
     from spreadgym.fit.uncertainty import REGIME_SWITCH
 
     lines = ["# Fit bench: synthetic tray tests", "",
              f"{len(rows)} tests; truth: {rows[0]['truth_model'] if rows else '-'} model, {truth_granules} granules, "
-             f"5 % catch noise, 0.5 m trays, one pass; fit: compiled model, {fit_granules} granules per "
-             f"evaluation, search {SEARCH}; {workers} worker(s) x {threads} thread(s).", "",
+             f"{100 * catch_sd:g} % catch noise, 0.5 m trays, one pass; fit: compiled model, {fit_granules} "
+             f"granules per evaluation, search {SEARCH}; {workers} worker(s) x {threads} thread(s).", "",
              "Intervals with the model discrepancy carried (the fit's) and without it (the profile and the "
              "simulation's error only: the fit before the discrepancy was added), on the same tests:", "",
              "| key | intervals | tests | identifiable (sliding / rolling) | 90 % coverage (identifiable) "
@@ -180,6 +185,6 @@ def fit_markdown(rows: list[dict], fit_granules: int, truth_granules: int, worke
                          f"{statistics.median(r['evaluations'] for r in subset):.0f} |")
     sds = np.array([r["catch_sd"] for r in rows])
     if sds.size:
-        lines += ["", f"Estimated catch noise (log s.d.): median {np.median(sds):.3f} (true 0.05; the simulation's "
-                      "and counting variances are carried separately)."]
+        lines += ["", f"Estimated catch noise (log s.d.): median {np.median(sds):.3f} (true {catch_sd:g}; the "
+                      "simulation's and counting variances are carried separately)."]
     return "\n".join(lines) + "\n"
