@@ -66,9 +66,18 @@ def run(args: argparse.Namespace) -> int:
 
 def summary(data: dict) -> str:
     """The estimates and intervals, for people."""
+    from spreadgym.fit.uncertainty import REGIME_SWITCH  # loaded by the fit already
+
     rows = []
     for key, v in data["parameters"].items():
-        state = "yes" if data["identifiable"][key] else "no: the test does not determine it"
+        switch = data.get("regime_switch", {}).get(key, 0.0)
+        if data["identifiable"][key]:
+            state = "yes"
+        elif switch > REGIME_SWITCH:
+            state = (f"no: vane friction turns {100 * switch:.0f} % of the granules between sliding and rolling "
+                     "inside the interval (the fit model changes regime at another friction than the full model)")
+        else:
+            state = "no: the test does not determine it"
         rows.append((key, f"{v['estimate']:.4g}", f"[{v['low']:.4g}, {v['high']:.4g}]", state))
     table = format_table(rows, ("key", "estimate", "90 % interval", "identifiable"))
     lines = [f"fit of {data['scene']} to {data['trays_file']} ({data['trays_used']} trays, "

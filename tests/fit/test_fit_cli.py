@@ -66,3 +66,17 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys):
         code = main(["fit", *argv])
         err = capsys.readouterr().err
         assert code == 2 and expected in err and err.count("\n") == 1, (argv, err)
+
+
+def test_the_summary_says_why_a_key_is_not_identifiable():
+    from spreadgym.cli.fit import summary
+
+    data = {"scene": "paper", "trays_file": "t.csv", "trays_used": 21, "evaluations": 9, "wall_s": 1.0,
+            "catch_noise_sd": 0.05, "discrepancy_points": 4,
+            "parameters": {k: {"estimate": 0.3, "low": 0.25, "high": 0.35} for k in ("a", "b", "c")},
+            "identifiable": {"a": True, "b": False, "c": False},
+            "regime_switch": {"a": 0.0, "b": 0.4, "c": 0.0}, "trade_offs": [], "cv_percent_at_target": None,
+            "cv_percent_at_target_band": None, "scene_yaml": None}
+    text = summary(data)
+    assert "turns 40 % of the granules between sliding and rolling" in text
+    assert "no: the test does not determine it" in text
