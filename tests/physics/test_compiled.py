@@ -229,3 +229,20 @@ def test_a_granule_sliding_off_a_vane_tip_goes_round_it(prepare):
                                params, layout.pack_vanes(scene), out, track)
     assert code == DEPARTED
     assert np.count_nonzero(~np.isnan(track[:, 0])) < 1000
+
+
+def test_the_machine_frame_turn_is_the_numpy_rotation():
+    from spreadgym.physics.compiled.model import machine_frame
+    from spreadgym.physics.granules import rotate
+
+    rng = np.random.default_rng(3)
+    out = rng.normal(size=(500, granule_run.OUT_SIZE))
+    angle, omega = rng.uniform(-np.pi, np.pi, 500), 73.3
+    c = out[:, [granule_run.CX, granule_run.CY]]
+    v = out[:, [granule_run.VX, granule_run.VY]] + omega * np.stack([-c[:, 1], c[:, 0]], axis=1)
+    turn = angle + omega * out[:, granule_run.TIME]
+    position, velocity, got_turn = machine_frame(out, angle, omega)
+    assert np.array_equal(got_turn, turn)
+    # the C library's cos and sin against numpy's: the same bits where numpy calls the C library
+    np.testing.assert_allclose(position, rotate(c, turn), rtol=0, atol=4e-16 * np.abs(c).max())
+    np.testing.assert_allclose(velocity, rotate(v, turn), rtol=0, atol=4e-16 * np.abs(v).max())

@@ -11,18 +11,21 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Optional
 
+import math
+
 import numpy as np
 
 from spreadgym.config.scene import Scene
 from spreadgym.physics.compiled import granule_run
 from spreadgym.physics.compiled.layout import OMEGA_STEP, STEP, V_SIZE, pack_parameters, pack_vanes
+from spreadgym.physics.compiled.options import KERNEL
 from spreadgym.physics.contacts import Contacts
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import GranuleBatch, rotate
 from spreadgym.physics.numerics import choose_time_step
 from spreadgym.physics.stepped.finish import MAX_SPINNER_TIME_S, STUCK_SPEED_M_S
 from spreadgym.physics.vertical import free_fall_to
-from spreadgym.threads import numba_threads
+from spreadgym.threads import numba_threads, thread_map
 
 MAX_TRACK_POINTS = 20_000
 
@@ -112,20 +115,17 @@ def simulate_compiled(
 
 def simulate_compiled_batch(runs: list[tuple[Scene, GranuleBatch, Contacts]]) -> list[Departure]:
     """`simulate_compiled` of each (scene, granules, contacts), all granules in one parallel
-    kernel run; the same bits as one call each."""
+    kernel run, the departure states turned to the machine frame side by side on threads
+    (a GIL-free kernel each); the same bits as one call each."""
     batch = [kernel_inputs(*run) for run in runs]
-    return [departure_from(inputs, run[0].spinner.omega_rad_s, *result)
-            for inputs, run, result in zip(batch, runs, run_kernels(batch))]
+    results = run_kernels(batch)
+    return thread_map(lambda i: departure_from(batch[i], runs[i][0].spinner.omega_rad_s, *results[i]), len(runs))
 
 
 def departure_from(inputs: KernelInputs, omega: float, out: np.ndarray, outcome: np.ndarray,
                    tracks: np.ndarray) -> Departure:
     """The departure states (machine frame) from the kernel's output for `inputs`."""
-    t = out[:, granule_run.TIME]
-    c = out[:, [granule_run.CX, granule_run.CY]]
-    v = out[:, [granule_run.VX, granule_run.VY]]
-    v_inertial = v + omega * np.stack([-c[:, 1], c[:, 0]], axis=1)
-    turn = inputs.spinner_angle + omega * t
+    position, velocity, turn = machine_frame(out, inputs.spinner_angle, omega)
     params = inputs.params
     notes = [
         f"largest step {params[STEP]:.3g} s (|omega| dt = {OMEGA_STEP:g}), cut at every event "
@@ -135,13 +135,14 @@ def departure_from(inputs: KernelInputs, omega: float, out: np.ndarray, outcome:
     stalled = int(out[:, granule_run.STALLED].sum())
     if stalled:
         notes.append(f"{stalled} granule(s) stopped by the event-loop guard, counted as timed out")
+    c = out[:, [granule_run.CX, granule_run.CY]]
     return Departure(
-        position_m=rotate(c, turn),
-        velocity_m_s=rotate(v_inertial, turn),
+        position_m=position,
+        velocity_m_s=velocity,
         spin_rad_s=out[:, granule_run.SPIN].copy(),
         height_m=out[:, granule_run.Z].copy(),
         vertical_velocity_m_s=out[:, granule_run.VZ].copy(),
-        time_s=t + inputs.t_fall,
+        time_s=out[:, granule_run.TIME] + inputs.t_fall,
         outcome=outcome,
         model="compiled",
         dt_s=float(params[STEP]),
@@ -149,6 +150,25 @@ def departure_from(inputs: KernelInputs, omega: float, out: np.ndarray, outcome:
         tracks=[_machine_track(tracks[k], inputs.spinner_angle[k], omega, rotate(c[k:k + 1], turn[k:k + 1])[0])
                 for k in range(tracks.shape[0])],
     )
+
+
+@KERNEL
+def machine_frame(out, spinner_angle, omega):
+    """(position (N, 2), velocity (N, 2), turn (N,)) in the machine frame from the kernel's
+    disc-frame output: the disc-frame velocity plus omega x r, both turned by the spinner's
+    angle at departure, spinner_angle + omega t, as `granules.rotate` turns them (the same
+    bits where numpy's cos and sin are the C library's, as on the machines measured). One
+    GIL-free pass: a batch turns its runs' states side by side."""
+    n = out.shape[0]
+    position, velocity, turn = np.empty((n, 2)), np.empty((n, 2)), np.empty(n)
+    for i in range(n):
+        cx, cy = out[i, granule_run.CX], out[i, granule_run.CY]
+        vx, vy = out[i, granule_run.VX] + omega * -cy, out[i, granule_run.VY] + omega * cx
+        turn[i] = spinner_angle[i] + omega * out[i, granule_run.TIME]
+        c, s = math.cos(turn[i]), math.sin(turn[i])
+        position[i, 0], position[i, 1] = c * cx - s * cy, s * cx + c * cy
+        velocity[i, 0], velocity[i, 1] = c * vx - s * vy, s * vx + c * vy
+    return position, velocity, turn
 
 
 def _machine_track(rows: np.ndarray, start_angle: float, omega: float, end: np.ndarray) -> np.ndarray:
