@@ -160,7 +160,9 @@ def swept_record(spec, cell, record: dict, pick: int, before: int, after: int) -
     base = {k: detail[k] for k in ("key", "search_unit_settings", "objective", "method", "search_evaluations",
                                    "rescores", "ties", "tie_set")}
     base["sweep"] = sweep_block(tie, pick, kept if pick != tie["search_pick"] else None, before, after)
-    # the new verification's runs and time come on top of the search's and the earlier verification's
+    # the new verification's runs and time come on top of the search's and the search pick's verification
+    # (a record already moved by an earlier sweep counts that pick's verification once, not again)
+    simulations = row["simulations"] - (spec.verify_simulations if current_pick(detail) != tie["search_pick"] else 0)
     return verified_record(spec, cell, np.asarray(point["unit_settings"], dtype=float), point["cv_search_percent"],
-                           point["cv_search_standard_error_percent"], row["simulations"], base,
+                           point["cv_search_standard_error_percent"], simulations, base,
                            time.perf_counter() - row["wall_s"])

@@ -13,7 +13,7 @@ from spreadgym.agents.chart import make_spec, run_chart
 from spreadgym.agents.chart.quality import chart_quality
 from spreadgym.agents.chart.search import verified_record
 from spreadgym.agents.chart.store import record_problem
-from spreadgym.agents.chart.sweep import Point, row_turns, steadiest, step
+from spreadgym.agents.chart.sweep import Point, row_turns, steadiest, step, swept_record
 
 FERTILIZER = "compound-10-16-10"
 
@@ -161,6 +161,12 @@ def test_a_moved_cell_is_verified_at_its_pick_and_the_sweep_is_idempotent(chart)
     wrong = json.loads(json.dumps(moved))
     wrong["detail"]["sweep"]["pick"] = tie["search_pick"]
     assert record_problem(spec, cell, wrong) == "its settings are not its pick's"
+    # moved again (another sweep of other tie sets): still the search's, the search pick's and this pick's runs
+    (third,) = set(range(len(tie["points"]))) - {block["pick"], tie["search_pick"]}
+    again = swept_record(spec, cell, moved, third, 0, 0)
+    assert again["detail"]["unit_settings"] == tie["points"][third]["unit_settings"]
+    assert again["row"]["simulations"] == moved["row"]["simulations"]
+    assert again["detail"]["sweep"]["search_pick_verified"] == kept and record_problem(spec, cell, again) is None
 
 
 def test_the_chain_follows_the_search_picks_not_the_swept_ones(chart, tmp_path):
