@@ -11,12 +11,12 @@ on it (every granule's arithmetic is the same on any thread).
 
 from __future__ import annotations
 
+import itertools
 import os
 import sys
 import threading
-import itertools
 from contextlib import contextmanager
-from typing import Callable, Iterator, Optional, Sequence, TypeVar
+from typing import Callable, Iterator, Optional, TypeVar
 
 from spreadgym.errors import ConfigError
 

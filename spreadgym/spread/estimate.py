@@ -26,11 +26,10 @@ K - 1 degrees of freedom.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Optional
-
-import math
 
 import numpy as np
 from scipy.special import stdtrit

@@ -38,11 +38,10 @@ Conventions (x across the track, to the right of the machine; SI units):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Optional, Sequence
-
 import math
+from dataclasses import dataclass
 from functools import lru_cache
+from typing import Optional, Sequence
 
 import numpy as np
 

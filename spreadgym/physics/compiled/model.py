@@ -8,10 +8,9 @@ machine frame here. Same outcomes, fields and time origin as simulate_pymunk.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Optional
-
-import math
 
 import numpy as np
 
