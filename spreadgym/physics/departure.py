@@ -59,7 +59,8 @@ class Departure:
                       math.copysign(1.0, omega_rad_s))
 
     def outcome_counts(self) -> dict[str, int]:
-        return {name: int(np.sum(self.outcome == code)) for code, name in enumerate(OUTCOMES)}
+        counts = np.bincount(self.outcome, minlength=len(OUTCOMES))
+        return {name: int(counts[code]) for code, name in enumerate(OUTCOMES)}
 
 
 def tilted_by_cone(departure: Departure, cone_rad: float) -> Departure:

@@ -74,7 +74,7 @@ class Trays:
             raise ConfigError("trays", f"need an odd number of trays centred on the axis, got {center.size}")
         m = center.size // 2
         grid = np.arange(-m, m + 1) * width
-        if not np.allclose(center, grid, rtol=0.0, atol=_GRID_TOL * max(width, 1.0) * (m + 1)):
+        if not np.max(np.abs(center - grid)) <= _GRID_TOL * max(width, 1.0) * (m + 1):  # NaN fails too
             raise ConfigError("trays", "tray centres must be i * width_m for i = -m..m")
         if not np.all(np.isfinite(mass)) or np.any(mass < 0):
             raise ConfigError("trays", "tray masses must be finite and >= 0")
@@ -161,7 +161,9 @@ def collect_replicates(x_m, mass_kg, replicate, replicates: int, tray_width_m: f
     (spreadgym.spread.binning); the sums are bincount's."""
     w = _check_tray_width(tray_width_m)
     x = np.asarray(x_m, dtype=float).reshape(-1)
-    mass = np.broadcast_to(np.asarray(mass_kg, dtype=float), x.shape)
+    mass = np.asarray(mass_kg, dtype=float)
+    if mass.shape != x.shape:  # one mass for all
+        mass = np.broadcast_to(mass, x.shape)
     half = float(min_half_width_m)
     if not (np.isfinite(half) and half >= 0):
         raise ConfigError("min_half_width_m", f"must be >= 0, got {min_half_width_m!r}")
