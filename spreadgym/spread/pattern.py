@@ -124,17 +124,8 @@ def _check_driving(driving: str) -> str:
 
 
 def bout_tray_count(bout_width_m: float, tray_width_m: float) -> int:
-    """n = W / w, which must be a positive integer (to rounding)."""
-    w = _check_tray_width(tray_width_m)
-    W = float(bout_width_m)
-    ratio = W / w if np.isfinite(W) else np.nan
-    n = int(round(ratio)) if np.isfinite(ratio) else 0
-    if n < 1 or abs(ratio - n) > _GRID_TOL * max(1.0, ratio):
-        raise ConfigError(
-            "pattern.target_swath_m",
-            f"bout width {bout_width_m!r} m is not a positive multiple of the tray width {w} m",
-        )
-    return n
+    """n = W / w, which must be a positive integer (to rounding): `bout_tray_counts` of one width."""
+    return int(bout_tray_counts([bout_width_m], tray_width_m)[0])
 
 
 def collect(x_m, mass_kg, tray_width_m: float, min_half_width_m: float = 0.0) -> Trays:
@@ -185,15 +176,17 @@ def collect_replicates(x_m, mass_kg, replicate, replicates: int, tray_width_m: f
 
 
 def bout_tray_counts(widths_m, tray_width_m: float) -> np.ndarray:
-    """`bout_tray_count` of every width in `widths_m` (int64 array), the same check."""
+    """n = W / w of every bout width W in `widths_m` (int64 array); each must be a positive
+    integer to rounding, else a one-line error names the first that is not."""
     w = _check_tray_width(tray_width_m)
     widths = np.asarray(widths_m, dtype=float).reshape(-1)
     with np.errstate(invalid="ignore", over="ignore"):
         ratio = widths / w
         n = np.where(np.isfinite(ratio), np.rint(ratio), 0.0)
-    bad = (n < 1) | (np.abs(ratio - n) > _GRID_TOL * np.maximum(1.0, ratio)) | ~np.isfinite(ratio)
+        bad = (n < 1) | ~(np.abs(ratio - n) <= _GRID_TOL * np.maximum(1.0, ratio))
     if bad.any():
-        bout_tray_count(widths[np.argmax(bad)], w)  # raises its one-line error
+        raise ConfigError("pattern.target_swath_m", f"bout width {float(widths[np.argmax(bad)])!r} m is not a "
+                                                    f"positive multiple of the tray width {w} m")
     return n.astype(np.int64)
 
 
