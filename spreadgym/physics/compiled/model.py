@@ -124,7 +124,7 @@ def simulate_compiled_batch(runs: list[tuple[Scene, GranuleBatch, Contacts]]) ->
 def departure_from(inputs: KernelInputs, omega: float, out: np.ndarray, outcome: np.ndarray,
                    tracks: np.ndarray) -> Departure:
     """The departure states (machine frame) from the kernel's output for `inputs`."""
-    position, velocity, turn = machine_frame(out, inputs.spinner_angle, omega)
+    position, velocity = machine_frame(out, inputs.spinner_angle, omega)
     params = inputs.params
     notes = [
         f"largest step {params[STEP]:.3g} s (|omega| dt = {OMEGA_STEP:g}), cut at every event "
@@ -134,7 +134,6 @@ def departure_from(inputs: KernelInputs, omega: float, out: np.ndarray, outcome:
     stalled = int(out[:, granule_run.STALLED].sum())
     if stalled:
         notes.append(f"{stalled} granule(s) stopped by the event-loop guard, counted as timed out")
-    c = out[:, [granule_run.CX, granule_run.CY]]
     return Departure(
         position_m=position,
         velocity_m_s=velocity,
@@ -146,28 +145,27 @@ def departure_from(inputs: KernelInputs, omega: float, out: np.ndarray, outcome:
         model="compiled",
         dt_s=float(params[STEP]),
         notes=notes,
-        tracks=[_machine_track(tracks[k], inputs.spinner_angle[k], omega, rotate(c[k:k + 1], turn[k:k + 1])[0])
-                for k in range(tracks.shape[0])],
+        tracks=[_machine_track(tracks[k], inputs.spinner_angle[k], omega, position[k]) for k in range(tracks.shape[0])],
     )
 
 
 @KERNEL
 def machine_frame(out, spinner_angle, omega):
-    """(position (N, 2), velocity (N, 2), turn (N,)) in the machine frame from the kernel's
+    """(position (N, 2), velocity (N, 2)) in the machine frame from the kernel's
     disc-frame output: the disc-frame velocity plus omega x r, both turned by the spinner's
     angle at departure, spinner_angle + omega t, as `granules.rotate` turns them (the same
     bits where numpy's cos and sin are the C library's, as on the machines measured). One
     GIL-free pass: a batch turns its runs' states side by side."""
     n = out.shape[0]
-    position, velocity, turn = np.empty((n, 2)), np.empty((n, 2)), np.empty(n)
+    position, velocity = np.empty((n, 2)), np.empty((n, 2))
     for i in range(n):
         cx, cy = out[i, granule_run.CX], out[i, granule_run.CY]
         vx, vy = out[i, granule_run.VX] + omega * -cy, out[i, granule_run.VY] + omega * cx
-        turn[i] = spinner_angle[i] + omega * out[i, granule_run.TIME]
-        c, s = math.cos(turn[i]), math.sin(turn[i])
+        turn = spinner_angle[i] + omega * out[i, granule_run.TIME]
+        c, s = math.cos(turn), math.sin(turn)
         position[i, 0], position[i, 1] = c * cx - s * cy, s * cx + c * cy
         velocity[i, 0], velocity[i, 1] = c * vx - s * vy, s * vx + c * vy
-    return position, velocity, turn
+    return position, velocity
 
 
 def _machine_track(rows: np.ndarray, start_angle: float, omega: float, end: np.ndarray) -> np.ndarray:
