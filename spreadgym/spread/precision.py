@@ -238,9 +238,9 @@ def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, lib
             add(run_scene(scene, model=model, library=library, ci=False, tracks=tracks))
             todo = todo[1:]
         most = max(1, MAX_GRANULE_COPIES // granule_copies(scene))
-        per_batch = -(-len(todo) // -(-len(todo) // most)) if todo else 1  # even batches: none left with a few runs
-        for start in range(0, len(todo), per_batch):
-            chunk = todo[start:start + per_batch]
+        batches = max(1, math.ceil(len(todo) / most))  # as few as the cap allows, of even size
+        for chunk in np.array_split(np.array(todo, dtype=int), batches):
+            chunk = chunk.tolist()
             for result in run_batch([scene] * len(chunk), model=model, library=library, ci=False,
                                     first_replicate=[j * per_run for j in chunk]):
                 add(result)
