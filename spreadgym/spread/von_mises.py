@@ -98,9 +98,10 @@ def fill_turns(seeds: Sequence[Sequence[int]], starts: np.ndarray, stops: np.nda
     concentration above LARGE_KAPPA by numpy's own `vonmises`."""
     starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
     pairs = cos_out.shape[0] // 2
+    numpys = np.zeros(starts.size, dtype=bool)  # the runs numpy draws itself
     big = kappa > LARGE_KAPPA
-    numpys = np.array([bool(big[a:b].any()) for a, b in zip(starts, stops)] if big.any() else [False] * starts.size,
-                      dtype=bool)
+    if big.any():  # rare: a feed spot under about 0.1 mm
+        numpys[:] = [big[a:b].any() for a, b in zip(starts, stops)]
     kernel = np.flatnonzero(~numpys)
     if kernel.size:
         antithetic_turns(pcg64.seeded([seeds[r] for r in kernel]), starts[kernel], stops[kernel], kappa, cos_mu,

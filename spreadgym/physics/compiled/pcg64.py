@@ -25,8 +25,6 @@ HIGH, LOW, INC_HIGH, INC_LOW, HAS_HALF, HALF = range(6)
 bits), and whether a 32-bit half of the last output is kept for the next 32-bit draw."""
 MULTIPLIER_HIGH = np.uint64(0x2360ED051FC65DA4)  # the 128-bit LCG multiplier (numpy's, O'Neill's)
 MULTIPLIER_LOW = np.uint64(0x4385DF649FCCF645)
-
-
 POOL_SIZE = 4  # numpy's SeedSequence pool, 32-bit words
 INIT_A, MULT_A, INIT_B, MULT_B = 0x43B0D7E5, 0x931E8875, 0x8B51F9DD, 0x58F38DED  # its hash constants
 MIX_MULT_L, MIX_MULT_R = 0xCA01F9DD, 0x4973F715
@@ -132,7 +130,7 @@ def _set_seed(words):
 @INLINED
 def _mul_high(a, b):
     """The high 64 bits of the 128-bit product of the uint64s a and b."""
-    mask, half = np.uint64(0xFFFFFFFF), np.uint64(32)
+    mask, half = np.uint64(WORD), np.uint64(32)
     a_lo, a_hi, b_lo, b_hi = a & mask, a >> half, b & mask, b >> half
     lo_lo, hi_lo, lo_hi = a_lo * b_lo, a_hi * b_lo, a_lo * b_hi
     middle = (lo_lo >> half) + (hi_lo & mask) + lo_hi
@@ -172,7 +170,7 @@ def next32(state):
         return state[HALF]
     value = next64(state)
     state[HAS_HALF], state[HALF] = np.uint64(1), value >> np.uint64(32)
-    return value & np.uint64(0xFFFFFFFF)
+    return value & np.uint64(WORD)
 
 
 @INLINED
