@@ -35,14 +35,20 @@ def reversals(values: list[float]) -> list[tuple[int, float]]:
     return out
 
 
+def over_target(key: str, size: float, value: float) -> bool:
+    """Whether a reversal of `size` in setting `key` (turning at `value`) is over the
+    targets' size: RPM_REVERSAL of the disc speed there, PITCH_REVERSAL_DEG in a pitch."""
+    return size > (RPM_REVERSAL * value if key == "rpm" else PITCH_REVERSAL_DEG)
+
+
 def row_reversals(rows: list[dict], fertilizer: str) -> dict:
     """The rpm and pitch reversals over the targets' sizes along one fertilizer's row."""
     mine = sorted((r for r in rows if r["fertilizer"] == fertilizer), key=lambda r: r["width_m"])
     rpm = [r["rpm"] for r in mine]
     pitches = [k for k in (mine[0] if mine else {}) if k.endswith("pitch_deg")]
-    big_rpm = [(mine[i]["width_m"], size / rpm[i]) for i, size in reversals(rpm) if size > RPM_REVERSAL * rpm[i]]
+    big_rpm = [(mine[i]["width_m"], size / rpm[i]) for i, size in reversals(rpm) if over_target("rpm", size, rpm[i])]
     big_pitch = [(mine[i]["width_m"], size) for k in pitches for i, size in reversals([r[k] for r in mine])
-                 if size > PITCH_REVERSAL_DEG]
+                 if over_target(k, size, mine[i][k])]
     return {"rpm": big_rpm, "pitch": big_pitch}
 
 

@@ -29,7 +29,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from spreadgym.agents.chart.quality import PITCH_REVERSAL_DEG, RPM_REVERSAL
+from spreadgym.agents.chart.quality import over_target, reversals
 
 RULE = ("fewest rpm (> 5 %) and pitch (> 3 deg) reversals, then least movement in the unit box, "
         "then least score excess over each cell's best, among each cell's tied points")
@@ -47,17 +47,9 @@ class Point:
 
 def turns(a: Point, b: Point, c: Point) -> int:
     """Reversals over the targets' sizes at the middle width `b` (rpm relative to `b`'s, pitches in degrees)."""
-    count = 0
-    for key in b.values:
-        if key != "rpm" and not key.endswith("pitch_deg"):
-            continue
-        before, after = b.values[key] - a.values[key], c.values[key] - b.values[key]
-        if before * after >= 0:
-            continue
-        size = min(abs(before), abs(after))
-        limit = RPM_REVERSAL * b.values[key] if key == "rpm" else PITCH_REVERSAL_DEG
-        count += size > limit
-    return count
+    return sum(over_target(key, size, b.values[key]) for key in b.values
+               if key == "rpm" or key.endswith("pitch_deg")
+               for _, size in reversals([a.values[key], b.values[key], c.values[key]]))
 
 
 def step(a: Point, b: Point) -> float:
