@@ -130,3 +130,32 @@ def test_compiled_bout_cvs_match_numpy_jackknife(driving):
         loo = np.array([plain(np.delete(bouts, i, axis=0).sum(axis=0)) for i in range(6)])
         np.testing.assert_allclose(cv, max(0.0, 6 * raw - 5 * loo.mean()), rtol=1e-11, atol=1e-12)
         np.testing.assert_allclose(se, np.sqrt(5 / 6 * np.sum((loo - loo.mean()) ** 2)), rtol=1e-11, atol=1e-12)
+
+
+@pytest.mark.parametrize("driving", pattern.DRIVING)
+def test_many_replicates_curve_shared_out_over_threads_keeps_its_bits(driving):
+    """A pooled reference's curve (hundreds of replicates) is split by widths over the
+    threads; every width alone gives the same bits whatever the thread count, and the
+    leave-one-out sums (a running sum plus the rest) agree with numpy's jackknife."""
+    from spreadgym import threads
+
+    rng = np.random.default_rng(11)
+    masses = rng.random((300, 33)) * (rng.random((300, 33)) > 0.1)
+    widths = np.arange(1, 34) * TRAY_M
+    threads.set_threads(1)
+    try:
+        alone = estimate.cv_curve(masses, TRAY_M, driving, widths)
+        assert estimate.SPLIT_WORK < 300**2 * np.arange(1, 34).sum()  # the split path is the one taken
+        for count in (2, 3, 7):
+            threads.set_threads(count)
+            for got, want in zip(estimate.cv_curve(masses, TRAY_M, driving, widths), alone):
+                np.testing.assert_array_equal(got, want)
+    finally:
+        threads.set_threads(None)
+    for w, cv, se in list(zip(widths, *alone))[::8]:
+        bouts = masses @ pattern._fold_matrix(33, round(w / TRAY_M), driving).T
+        loo = bouts.sum(axis=0) - bouts
+        plain = 100.0 * loo.std(axis=1, ddof=1) / loo.mean(axis=1) if bouts.shape[1] > 1 else np.zeros(300)
+        raw = 100.0 * bouts.sum(axis=0).std(ddof=1) / bouts.sum(axis=0).mean() if bouts.shape[1] > 1 else 0.0
+        np.testing.assert_allclose(cv, max(0.0, 300 * raw - 299 * plain.mean()), rtol=1e-7, atol=1e-9)
+        np.testing.assert_allclose(se, np.sqrt(299 / 300 * np.sum((plain - plain.mean()) ** 2)), rtol=1e-7)
