@@ -286,8 +286,9 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     """Two users of the batch against their serial form (one design at a time, one
     thread), each a group of rows whose first is the serial figure: what `spreadgym
     reference --replicates RUNS` runs (`precision.reference_precisely`: `runs` paper runs
-    through the batch, their replicate tray masses pooled), against `run_scene` run by run
-    pooled the same way, and one CMA-ES
+    through the batch, their replicate tray masses pooled, the pooled pattern's CV curve
+    and standard errors), against `run_scene` run by run pooled and estimated the same
+    way (`reference.reference_from`), and one CMA-ES
     generation on SpinnerDesign (the population `cma` asks for at the start, stepped as
     one batch by `step_designs`, against one design at a time). Designs per second, median
     of `repeats` interleaved blocks and their range; the block results are checked equal."""
@@ -301,7 +302,8 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     from spreadgym.envs.vector import step_designs
     from spreadgym.physics.granules import replicate_sizes
     from spreadgym.spread.pipeline import run_scene
-    from spreadgym.spread.precision import PooledMasses, reference_precisely
+    from spreadgym.spread.precision import PooledMasses, PooledRuns, reference_precisely
+    from spreadgym.spread.reference import reference_from
     from spreadgym.studies.benchmarks import interleaved_rates
 
     everything = threads.thread_count()
@@ -314,13 +316,16 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
     resets = [(1000 + k, ctx.options()) for k in range(len(population))]
 
     def pooled_in_batches():
-        return reference_precisely(scene, runs=runs).pooled.pooled.masses()
+        found = reference_precisely(scene, runs=runs)
+        return np.concatenate([found.pooled.pooled.masses().ravel(), found.cv_percent, found.cv_standard_error_percent])
 
     def pooled_one_by_one():
         pooled = PooledMasses(scene.pattern.tray_width_m)
         for j in range(runs):
             pooled.add(run_scene(scene, ci=False, first_replicate=j * per_run).replicate_masses_kg)
-        return pooled.masses()
+        replicates = pooled.masses().shape[0]
+        found = reference_from(scene, PooledRuns(pooled, replicates, 0, 0, 0, 0.0, "", "", 0.0))
+        return np.concatenate([pooled.masses().ravel(), found.cv_percent, found.cv_standard_error_percent])
 
     def generation_one_by_one():
         return [step_designs(env, [reset], [x])[0][1] for reset, x in zip(resets, population)]
@@ -339,7 +344,7 @@ def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
                   for n in ((1,) if size == 1 else sorted({1, everything}))}
         rows, found = interleaved_rates(series, designs, repeats)
         first, *others = found.values()
-        if any(not np.array_equal(np.asarray(first), np.asarray(other)) for other in others):
+        if any(not np.array_equal(np.asarray(first), np.asarray(other), equal_nan=True) for other in others):
             raise AssertionError(f"{title}: the batch differs from one at a time")
         out.append(rows)
     env.close()
