@@ -53,6 +53,7 @@ from spreadgym.agents.chart.spec import Cell, ChartSpec, cell_seed
 from spreadgym.agents.evaluation import WORST_CV_PERCENT
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import scene_with
+from spreadgym.physics.selection import choose_model
 from spreadgym.spread.batch import run_batch
 from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.reference import pool_runs, reference_from
@@ -99,20 +100,36 @@ class Scorer:
         """The granule seed of the `k`-th nominal evaluation."""
         return int(var.child(self.fresh_seq, k).generate_state(1)[0])
 
-    def score(self, unit: np.ndarray, cell_draws: Optional[list] = None, seed: Optional[int] = None) -> tuple:
-        """(cost, CV %): robust, the quantile over `cell_draws` in one batch; nominal, one run at `seed`."""
+    def model(self, settings: dict) -> str:
+        """The model of a candidate's runs: the search model, `auto` resolved once on the candidate as
+        dialled, so a draw whose disc speed or pitch the variability model nudges past the envelope the
+        compiled model was validated in (`selection.VALIDATED`) stays on the candidate's model."""
+        return choose_model(scene_with(self.scene, settings), self.spec.search_model)[0]
+
+    def score_many(self, units: list, cell_draws: Optional[list] = None,
+                   seeds: Optional[list] = None) -> list[tuple]:
+        """(cost, CV %) of each of `units`: robust, the quantile over `cell_draws`; nominal, one run at its seed
+        in `seeds`. All runs in one `run_batch` per model (the same bits as one call per unit or per run)."""
         spec, library = self.spec, load_library()
-        settings = self.space.overrides(unit)
-        if spec.objective == "nominal":
-            scenes = [scene_with(self.scene, settings | {"sim.seed": seed})]
-        else:
+        if spec.objective != "nominal":
             library = var.draw_library(library, self.cell.fertilizer, cell_draws)
-            scenes = [scene_with(self.scene, var.perturbed(self.scene, settings, d, library)) for d in cell_draws]
-        found = [objective(r.metrics, self.cell.width_m)
-                 for r in run_batch(scenes, model=spec.search_model, library=library, ci=False)]
-        self.simulations += len(scenes)
-        costs, cvs = [f[0] for f in found], [f[1] for f in found]
-        return var.quantile(costs, self.quantile), var.quantile(cvs, self.quantile)
+        runs = []  # (model, scenes) of each unit
+        for unit, seed in zip(units, seeds or [None] * len(units)):
+            settings = self.space.overrides(unit)
+            if spec.objective == "nominal":
+                scenes = [scene_with(self.scene, settings | {"sim.seed": seed})]
+            else:
+                scenes = [scene_with(self.scene, var.perturbed(self.scene, settings, d, library)) for d in cell_draws]
+            runs.append((self.model(settings), scenes))
+        found: dict = {}
+        for model in dict.fromkeys(m for m, _ in runs):
+            mine = [i for i, (m, _) in enumerate(runs) if m == model]
+            results = iter(run_batch([s for i in mine for s in runs[i][1]], model=model, library=library, ci=False))
+            found.update({i: [objective(next(results).metrics, self.cell.width_m) for _ in runs[i][1]] for i in mine})
+        self.simulations += sum(len(scenes) for _, scenes in runs)
+        return [(var.quantile([f[0] for f in found[i]], self.quantile), var.quantile([f[1] for f in found[i]],
+                                                                                        self.quantile))
+                for i in range(len(runs))]
 
 
 def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np.ndarray], cma_seed: int,
@@ -125,14 +142,15 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
 
     search_cvs: list[float] = []
 
-    def evaluate(unit):
-        k = next(count)
-        cost, cv = scorer.score(unit, *((None, scorer.fresh_seed(k)) if nominal else (scorer.search_draws, None)))
-        search_cvs.append(cv)
-        return -cost
+    def evaluate_many(units):
+        seeds = [scorer.fresh_seed(next(count)) for _ in units] if nominal else None
+        found = scorer.score_many(units, None if nominal else scorer.search_draws, seeds)
+        search_cvs.extend(cv for _, cv in found)
+        return [-cost for cost, _ in found]
 
     search_budget, _ = split_budget(spec.budget)
-    result = cmaes_search(evaluate, scorer.space.size, search_budget, seed=cma_seed, sigma0=sigma0, x0=x0)
+    result = cmaes_search(lambda unit: evaluate_many([unit])[0], scorer.space.size, search_budget, seed=cma_seed,
+                          sigma0=sigma0, x0=x0, many=evaluate_many)
     rescore_budget = spec.budget - result.evaluations
     extras = [x for x in (neighbour, proposal) if x is not None]
     kept = leaders(result, max(1, min(LEADERS, rescore_budget // 2 - len(extras))))
@@ -149,8 +167,7 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
     for r in range(rounds):
         cell_draws = None if nominal else scorer.round_draws(r)
         seed = scorer.fresh_seed(result.evaluations + r) if nominal else None
-        for i, x in enumerate(kept):
-            scores[i, r] = scorer.score(x, cell_draws, seed)
+        scores[:, r] = scorer.score_many(kept, cell_draws, [seed] * len(kept))
     means = scores[:, :, 0].mean(axis=1)
     best = int(np.argmin(means))
     best_se = float(scores[best, :, 0].std(ddof=1) / math.sqrt(rounds))

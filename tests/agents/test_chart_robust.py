@@ -66,8 +66,17 @@ def test_every_candidate_of_a_cell_meets_the_same_draws():
     assert a.search_draws == b.search_draws and len(a.search_draws) == 4
     assert a.round_draws(1) == b.round_draws(1) != a.round_draws(0)
     x = np.array([0.2, -0.1])
-    assert a.score(x, a.search_draws) == a.score(x, a.search_draws)  # common random numbers: bit for bit
+    assert a.score_many([x], a.search_draws) == a.score_many([x], a.search_draws)  # common random numbers
     assert a.simulations == 8
+    y = np.array([-0.4, 0.3])
+    assert a.score_many([x, y], a.search_draws) == a.score_many([x], a.search_draws) + a.score_many([y], a.search_draws)
+
+
+def test_a_candidates_draws_run_on_the_model_auto_picks_for_it_as_dialled():
+    spec = make_spec("paper", FERTILIZER, "3", **{**SMALL, "search_model": "auto"})[0]
+    scorer = Scorer(spec, spec.cells[0], cell_seed(spec.seed, spec.cells[0]).spawn(5)[0])
+    top = scorer.space.overrides(np.array([1.0, 1.0]))  # 1100 rpm, 30 deg: draws reach 1122 rpm and 31 deg
+    assert scorer.model(top) == "compiled"
 
 
 def test_the_p90_is_the_full_model_over_the_rows_settings_on_fresh_draws(tmp_path):
@@ -97,12 +106,12 @@ def _fake_scorer(cost):
     noise = np.random.default_rng(0).normal(0.0, 0.5, 1000)
     calls = []
 
-    def score(x, draws=None, seed=None):
-        calls.append(draws)
+    def score_many(xs, draws=None, seeds=None):
+        calls.extend([draws] * len(xs))
         r = draws if isinstance(draws, int) else 999
-        return cost(np.asarray(x)) + noise[r], 1.0
+        return [(cost(np.asarray(x)) + noise[r], 1.0) for x in xs]
 
-    return SimpleNamespace(spec=spec, space=SimpleNamespace(size=2), search_draws=999, score=score,
+    return SimpleNamespace(spec=spec, space=SimpleNamespace(size=2), search_draws=999, score_many=score_many,
                            round_draws=lambda r: r, fresh_seed=lambda k: k)
 
 
