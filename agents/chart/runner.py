@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Callable, Optional, Sequence
 
 from spreadgym.agents.chart import outputs, sweep
-from spreadgym.agents.chart.search import run_cell
+from spreadgym.agents.chart.search import run_cell, score_candidates
 from spreadgym.agents.chart.spec import Cell, ChartSpec, make_spec
 from spreadgym.agents.chart.store import ChartStore
 from spreadgym.config.base import brief
@@ -181,49 +181,91 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
     return ChartResult(spec, payload, files, computed, reused, replaced, time.perf_counter() - started)
 
 
-def swept_with_picture(spec: ChartSpec, cell: Cell, record: dict, pick: int, before: int,
-                       after: int) -> tuple[dict, Optional[bytes]]:
+def swept_with_picture(spec: ChartSpec, cell: Cell, record: dict, pick: int, before: int, after: int,
+                       candidates: list, repair_wall_s: float) -> tuple[dict, Optional[bytes]]:
     """The cell's record after the row sweep, and its picture when the sweep re-verified it (else None)."""
-    swept = sweep.swept_record(spec, cell, record, pick, before, after)
+    swept = sweep.swept_record(spec, cell, record, pick, before, after, candidates, repair_wall_s)
     moved = swept["detail"]["unit_settings"] != record["detail"]["unit_settings"]
     return swept, outputs.cell_picture(spec, cell, swept) if moved else None
 
 
+def _map(function, jobs: list, remote: bool) -> list:
+    """[function(spec, *job) for job in jobs]: as Ray tasks side by side when `remote` and Ray is running."""
+    if remote and jobs:
+        import ray
+
+        remote = ray.is_initialized()  # a chart whose cells were all found finished starts no Ray
+    if not (remote and jobs):
+        return [function(*job) for job in jobs]
+    import ray
+
+    task = ray.remote(num_cpus=1)(function)
+    return ray.get([task.remote(*job) for job in jobs])
+
+
+def repair_row(spec: ChartSpec, cells: list, records: dict, remote: bool) -> tuple[list, list]:
+    """The row repair (`sweep.repair`) of one row: (each cell's scored candidates, each cell's wall time of
+    the scoring done now). A candidate already in a cell's record (a resumed chart) is taken from it: scoring
+    is deterministic, so that is what scoring it again would give."""
+    details = [records[c.key]["detail"] for c in cells]
+    walls = [0.0] * len(cells)
+
+    def score(jobs: dict) -> dict:
+        found = {}
+        todo = []
+        for k, wanted in jobs.items():
+            known = {sweep.start_of(c): c for c in sweep.candidates_of(details[k])}
+            found[k] = [known.get(sweep.job_key(u, f)) for u, f in wanted]
+            missing = [(u, f) for u, f in wanted if sweep.job_key(u, f) not in known]
+            if missing:
+                todo.append((k, missing))
+        scored = _map(score_candidates, [(spec, cells[k], details[k], wanted) for k, wanted in todo], remote)
+        for (k, _), (points, wall) in zip(todo, scored):
+            new = iter(points)
+            found[k] = [p if p is not None else next(new) for p in found[k]]
+            walls[k] += wall
+        return found
+
+    spaces = [spec.space(spec.cell_scene(c)) for c in cells]
+    tried = sweep.repair(spaces, [c.width_m for c in cells], [d["tie_set"] for d in details], score)
+    return tried, walls
+
+
 def sweep_rows(spec: ChartSpec, store: ChartStore, records: dict, remote: bool = False) -> None:
-    """The row sweep (`agents.chart.sweep`) over every row whose cells are all in `records`: each cell's
-    pick among its tie set, a cell moved off the point it is verified at verified again (`remote`: as Ray
-    tasks if Ray is running, else here), every cell's file rewritten with what the sweep did."""
+    """The row repair and sweep (`agents.chart.sweep`) over every row whose cells are all in `records`: the
+    repair's candidates scored, each cell's pick among its tie set and its tied candidates, a cell moved off
+    the point it is verified at verified again (`remote`: as Ray tasks if Ray is running, else here), every
+    changed cell's file rewritten with what the sweep did."""
     jobs = []
     for fertilizer in spec.fertilizers:
         cells = [c for c in spec.cells if c.fertilizer == fertilizer]
         if not all(c.key in records for c in cells):
             continue
+        tried, walls = repair_row(spec, cells, records, remote)
         details = [records[c.key]["detail"] for c in cells]
-        points = sweep.row_points([spec.space(spec.cell_scene(c)) for c in cells], [d["tie_set"] for d in details])
+        points = sweep.row_points([spec.space(spec.cell_scene(c)) for c in cells],
+                                  [{**d["tie_set"], "points": sweep.points_of(d["tie_set"], t)}
+                                   for d, t in zip(details, tried)])
         picks = sweep.steadiest(points)
         before = sweep.row_turns(points, [d["tie_set"]["search_pick"] for d in details])
         after = sweep.row_turns(points, picks)
-        jobs += [(cell, pick, before, after) for cell, pick in zip(cells, picks)
-                 if (records[cell.key]["detail"]["sweep"] or {}).get("pick") != pick
-                 or sweep.current_pick(records[cell.key]["detail"]) != pick
-                 or records[cell.key]["detail"]["sweep"]["row_reversals_swept"] != after]
-    # a cell that keeps the point it is verified at only gets its sweep block: no task for it
-    verify = [job for job in jobs if sweep.current_pick(records[job[0].key]["detail"]) != job[1]]
-    results = {cell.key: swept_with_picture(spec, cell, records[cell.key], *rest)
-               for cell, *rest in jobs if (cell, *rest) not in verify}
-    if verify and remote:
-        import ray
+        jobs += [(cell, pick, before, after, t, wall) for cell, pick, t, wall in zip(cells, picks, tried, walls)]
 
-        remote = ray.is_initialized()  # a chart whose cells were all found finished starts no Ray
-    if verify and remote:
-        task = ray.remote(num_cpus=1)(swept_with_picture)
-        spec_ref = ray.put(spec)
-        refs = [task.remote(spec_ref, cell, records[cell.key], *rest) for cell, *rest in verify]
-        results.update({cell.key: result for (cell, *_), result in zip(verify, ray.get(refs))})
-    else:
-        results.update({cell.key: swept_with_picture(spec, cell, records[cell.key], *rest) for cell, *rest in verify})
+    def verifies(job) -> bool:
+        cell, pick, *_, candidates, _ = job
+        detail = records[cell.key]["detail"]
+        return detail["unit_settings"] != sweep.points_of(detail["tie_set"], candidates)[pick]["unit_settings"]
+
+    # a cell that keeps the point it is verified at only gets its sweep block: no task for it
+    verify = [job for job in jobs if verifies(job)]
+    results = {cell.key: swept_with_picture(spec, cell, records[cell.key], *rest)
+               for cell, *rest in jobs if not verifies((cell, *rest))}
+    done = _map(swept_with_picture, [(spec, cell, records[cell.key], *rest) for cell, *rest in verify], remote)
+    results.update({cell.key: result for (cell, *_), result in zip(verify, done)})
     for cell, *_ in jobs:
         record, picture = results[cell.key]
+        if record == records[cell.key]:
+            continue
         store.save(cell, record)
         if picture is not None:
             outputs.cell_figure(store, cell, record, picture)

@@ -50,6 +50,7 @@ import numpy as np
 from spreadgym.agents.baselines import CMA_SIGMA0, LEADERS, cmaes_search, leaders, split_budget
 from spreadgym.agents.chart import variability as var
 from spreadgym.agents.chart.spec import Cell, ChartSpec, cell_seed
+from spreadgym.agents.chart.sweep import SLICE_POINTS, SLICE_REFINE
 from spreadgym.agents.evaluation import WORST_CV_PERCENT
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import scene_with
@@ -163,11 +164,7 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
         point = tie_point(result.best_x, -float(result.history[i]), search_cvs[i], None)
         return {"x": result.best_x, "cv": search_cvs[i], "cv_se": None, "rounds": 0, "ties": 1,
                 "evaluations": result.evaluations, "tie_set": tie_set([point], 0, 0, None)}
-    scores = np.zeros((len(kept), rounds, 2))
-    for r in range(rounds):
-        cell_draws = None if nominal else scorer.round_draws(r)
-        seed = scorer.fresh_seed(result.evaluations + r) if nominal else None
-        scores[:, r] = scorer.score_many(kept, cell_draws, [seed] * len(kept))
+    scores = rescore(scorer, kept, rounds)
     means = scores[:, :, 0].mean(axis=1)
     best = int(np.argmin(means))
     best_se = float(scores[best, :, 0].std(ddof=1) / math.sqrt(rounds))
@@ -179,6 +176,69 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
     return {"x": kept[pick], "cv": float(scores[pick, :, 1].mean()), "cv_se": cv_se[pick],
             "rounds": rounds, "ties": len(ties), "evaluations": result.evaluations + rounds * len(kept),
             "tie_set": tie_set(points, ties.index(best), ties.index(pick), best_se)}
+
+
+def rescore(scorer: Scorer, points: list, rounds: int) -> np.ndarray:
+    """(cost, CV %) of each of `points` in each re-score round (points x rounds x 2): round `r` scores every
+    point on the same fresh samples (robust: `round_draws(r)`; nominal: the granule seed after the search's)."""
+    nominal = scorer.spec.objective == "nominal"
+    search_budget, _ = split_budget(scorer.spec.budget)  # the search spends exactly this (cmaes_search)
+    scores = np.zeros((len(points), rounds, 2))
+    for r in range(rounds):
+        cell_draws = None if nominal else scorer.round_draws(r)
+        seed = scorer.fresh_seed(search_budget + r) if nominal else None
+        scores[:, r] = scorer.score_many(points, cell_draws, [seed] * len(points))
+    return scores
+
+
+def slice_search(scorer: Scorer, start: np.ndarray, free: list) -> tuple[np.ndarray, int]:
+    """The row repair's steady slice: from `start`, each axis of `free` in turn on a grid of SLICE_POINTS
+    (then SLICE_REFINE steps around its best), the others kept, scored like the search (its draws): (the
+    best point, the evaluations)."""
+    x, evaluations = np.asarray(start, dtype=float).copy(), 0
+    grid = np.linspace(-1.0, 1.0, SLICE_POINTS)
+    for axis in free:
+        values = list(grid)
+        costs = [c for c, _ in scorer.score_many([np.where(np.arange(x.size) == axis, v, x) for v in values],
+                                                 scorer.search_draws, [scorer.fresh_seed(0)] * len(values))]
+        centre, step = values[int(np.argmin(costs))], grid[1] - grid[0]
+        near = [float(np.clip(centre + f * step, -1.0, 1.0)) for f in SLICE_REFINE]
+        near = [v for v in dict.fromkeys(near) if v not in values]
+        costs += [c for c, _ in scorer.score_many([np.where(np.arange(x.size) == axis, v, x) for v in near],
+                                                  scorer.search_draws, [scorer.fresh_seed(0)] * len(near))]
+        values += near
+        evaluations += len(values)
+        x[axis] = values[int(np.argmin(costs))]
+    return x, evaluations
+
+
+def score_candidates(spec: ChartSpec, cell: Cell, detail: dict, jobs: list) -> tuple[list[dict], float]:
+    """The row repair's candidates of a cell, `jobs` of (unit settings, free axes or None): a steady slice
+    (free axes given) searched first (`slice_search`); each re-scored on the cell's own re-score rounds (the
+    tie set's common random numbers). (A tie point with `tied` (within TIE_STANDARD_ERRORS of the tie set's
+    best, the chain's rule) per job, the wall time.)"""
+    started = time.perf_counter()
+    scorer = Scorer(spec, cell, cell_seed(spec.seed, cell).spawn(5)[0])
+    units, extra = [], []
+    for unit, free in jobs:
+        if free is None:
+            units.append(np.asarray(unit, dtype=float))
+            extra.append({})
+            continue
+        found, evaluations = slice_search(scorer, np.asarray(unit, dtype=float), free)
+        units.append(found)
+        extra.append({"start_unit_settings": [float(v) for v in unit], "free_axes": list(free),
+                      "slice_evaluations": evaluations})
+    rounds = detail["rescores"]
+    scores = rescore(scorer, units, rounds)
+    tie = detail["tie_set"]
+    limit = tie["points"][tie["best"]]["score_percent"] + TIE_STANDARD_ERRORS * tie["best_standard_error_percent"]
+    out = []
+    for unit, score, more in zip(units, scores, extra):
+        mean = float(score[:, 0].mean())
+        point = tie_point(unit, mean, float(score[:, 1].mean()), float(score[:, 1].std(ddof=1) / math.sqrt(rounds)))
+        out.append({**point, "tied": mean <= limit, **more})
+    return out, time.perf_counter() - started
 
 
 def tie_point(x: np.ndarray, score: Optional[float], cv: Optional[float], cv_se: Optional[float]) -> dict:

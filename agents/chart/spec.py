@@ -93,9 +93,15 @@ class ChartSpec:
 
     @property
     def max_simulations(self) -> int:
-        """Most simulations a cell may make: the search's and the verification's, twice when the row sweep
-        moved the cell to another tied point (verified again)."""
-        return self.budget * self.draws + 2 * self.verify_simulations
+        """Most simulations a cell may make: the search's, the row repair's (per pass at most
+        REPAIR_CANDIDATES candidates on at most the re-score budget's rounds, and one steady slice) and the
+        verification's, twice when the row sweep moved the cell to another point (verified again)."""
+        from spreadgym.agents.baselines import split_budget
+        from spreadgym.agents.chart.sweep import REPAIR_CANDIDATES, REPAIR_PASSES, SLICE_POINTS, SLICE_REFINE
+
+        axes = self.space(self.cell_scene(self.cells[0])).size
+        per_pass = REPAIR_CANDIDATES * split_budget(self.budget)[1] + axes * (SLICE_POINTS + len(SLICE_REFINE))
+        return (self.budget + REPAIR_PASSES * per_pass) * self.draws + 2 * self.verify_simulations
 
     def manifest(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}

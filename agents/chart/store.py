@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from spreadgym.agents.chart.spec import Cell, ChartSpec
+from spreadgym.agents.chart.sweep import points_of
 from spreadgym.config.base import brief
 from spreadgym.errors import SpreadgymError
 from spreadgym.report import print_json
@@ -202,6 +203,13 @@ def _tie_problem(detail: dict, size: int) -> Optional[str]:
     if detail["search_unit_settings"] != points[tie["search_pick"]]["unit_settings"]:
         return "its search pick is not in its tie set"
     at = swept.get("pick") if isinstance(swept, dict) else tie["search_pick"]
+    candidates = ((swept.get("repair") or {}).get("candidates", []) if isinstance(swept, dict) else [])
+    if not (isinstance(candidates, list) and all(
+            isinstance(c, dict) and isinstance(c.get("tied"), bool) and _reals(c.get("unit_settings"))
+            and len(c["unit_settings"]) == size and all(-1.0 <= u <= 1.0 for u in c["unit_settings"])
+            for c in candidates)):
+        return "its repair's candidates are not recorded"
+    points = points_of(tie, candidates)
     if swept is not None and not (isinstance(at, int) and 0 <= at < len(points)):
         return "its sweep is not recorded"
     if detail["unit_settings"] != points[at]["unit_settings"]:

@@ -20,12 +20,22 @@ A reversal is a property of three neighbouring widths, so the dynamic programme 
 runs over pairs of neighbouring points: O(cells x points^3), a few hundred steps for a
 row. The sweep reads the tie sets only: it needs no simulation, and the same tie sets
 give the same picks in any process.
+
+The repair (`repair`) widens the tie sets where the sweep leaves a reversal: a cell
+turning over the targets' sizes gets its neighbours' chosen points, their linear
+interpolation at its width and the steady slice's best point (the interpolation's
+turning settings kept, each other setting searched on a grid along its axis) as
+candidates, each neighbour the turning cell's point; the caller scores them on the
+cell's own re-score rounds (the tie set's common random numbers) and marks those within
+two standard errors of the cell's best as tied; the tied ones join the tie sets and the
+sweep runs again. At most `REPAIR_PASSES` passes, and only
+while a pass lowers the row's reversals; a candidate is scored once per cell.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -33,6 +43,15 @@ from spreadgym.agents.chart.quality import over_target, reversals
 
 RULE = ("fewest rpm (> 5 %) and pitch (> 3 deg) reversals, then least movement in the unit box, "
         "then least score excess over each cell's best, among each cell's tied points")
+REPAIR_RULE = ("where the sweep leaves a reversal: the turning cell scored at its neighbours' points, their "
+               "interpolation at its width and the best point of the steady slice (the interpolation's turning "
+               "settings kept, the others searched), each neighbour at the turning cell's point, on the cell's "
+               "own re-score rounds; those within two standard errors of the cell's best join its tie set; the "
+               "sweep again")
+REPAIR_PASSES = 3  # passes of candidates, each only while the last one lowered the row's reversals
+REPAIR_CANDIDATES = 6  # most candidates of a cell in one pass (4 as a turning cell, 1 as each turn's neighbour)
+SLICE_POINTS = 9  # the steady slice's grid along each searched axis (ends included), then SLICE_REFINE around its best
+SLICE_REFINE = (-0.5, -0.25, 0.25, 0.5)  # in grid steps
 
 
 @dataclass(frozen=True)
@@ -108,21 +127,102 @@ def row_turns(row: Sequence[Sequence[Point]], picks: Sequence[int]) -> int:
     return sum(turns(*chosen[k - 1:k + 2]) for k in range(1, len(chosen) - 1))
 
 
-def sweep_block(tie: dict, pick: int, search_pick_verified: Optional[dict], before: int, after: int) -> dict:
-    """What the sweep did to a cell (`detail["sweep"]`): its pick in the tie set, whether that moved the
-    cell off the search's pick, the search pick's own verification when it did, and the row's reversals
-    over the targets' sizes along the search's picks and along the sweep's."""
+def turning(row: Sequence[Sequence[Point]], picks: Sequence[int]) -> list[int]:
+    """The cells where the path `picks` turns over the targets' sizes."""
+    chosen = [cell[i] for cell, i in zip(row, picks)]
+    return [k for k in range(1, len(chosen) - 1) if turns(*chosen[k - 1:k + 2])]
+
+
+def points_of(tie: dict, candidates: Sequence[dict]) -> list[dict]:
+    """A cell's points the sweep chooses among: its tie set's, then the repair's tied candidates."""
+    return list(tie["points"]) + [c for c in candidates if c["tied"]]
+
+
+def turning_axes(a: Point, b: Point, c: Point) -> list[int]:
+    """The unit axes of the settings that turn over the targets' sizes at `b` (rpm, pitches)."""
+    return [i for i, key in enumerate(b.values) if (key == "rpm" or key.endswith("pitch_deg"))
+            and any(over_target(key, size, b.values[key]) for _, size in reversals([a.values[key], b.values[key],
+                                                                                    c.values[key]]))]
+
+
+def neighbour_candidates(row: Sequence[Sequence[Point]], picks: Sequence[int], widths: Sequence[float],
+                         k: int) -> list[tuple[int, list, str, Optional[list]]]:
+    """(cell, unit settings, source, free axes) of the candidates of a turn at cell `k`: for `k` the
+    neighbours' chosen points, their linear interpolation at `k`'s width, and the steady slice (the
+    interpolation's turning settings kept, the others searched: free axes given); for each neighbour `k`'s
+    point."""
+    a, b, c = (row[j][picks[j]] for j in (k - 1, k, k + 1))
+    t = (widths[k] - widths[k - 1]) / (widths[k + 1] - widths[k - 1])
+    ua, ub, uc = (np.asarray(p.unit, dtype=float) for p in (a, b, c))
+    between = np.clip(ua + t * (uc - ua), -1.0, 1.0).tolist()
+    out = [(k, ua.tolist(), "narrower", None), (k, uc.tolist(), "wider", None), (k, between, "between", None)]
+    free = [i for i in range(len(ub)) if i not in turning_axes(a, b, c)]
+    if 0 < len(free) < len(ub):
+        out.append((k, between, "slice", free))
+    return out + [(k - 1, ub.tolist(), "wider", None), (k + 1, ub.tolist(), "narrower", None)]
+
+
+def job_key(unit: Sequence[float], free: Optional[Sequence[int]]) -> tuple:
+    """What identifies a candidate: where it starts and the axes searched from there (None: none)."""
+    return tuple(unit), None if free is None else tuple(free)
+
+
+def start_of(candidate: dict) -> tuple:
+    """The `job_key` of a scored candidate."""
+    return job_key(candidate.get("start_unit_settings", candidate["unit_settings"]), candidate.get("free_axes"))
+
+
+def repair(spaces: Sequence, widths: Sequence[float], tie_sets: Sequence[dict],
+           score: Callable[[dict], dict], passes: int = REPAIR_PASSES) -> list[list[dict]]:
+    """The candidates each cell of a row was scored at (in order), each a tie point with `tied`, `source`
+    and `pass`. `score({cell: [(unit settings, free axes or None), ...]})` returns {cell: [point, ...]} (a
+    tie point with `tied`; where free axes are given, the best point of a search of them from the unit
+    settings). Cells whose tie set has no standard error (no re-score rounds) get no candidates."""
+    tried: list[list[dict]] = [[] for _ in tie_sets]
+    for pass_ in range(passes):
+        row = row_points(spaces, [{**t, "points": points_of(t, c)} for t, c in zip(tie_sets, tried)])
+        picks = steadiest(row)
+        now = row_turns(row, picks)
+        jobs: dict[int, list] = {}
+        for k in turning(row, picks):
+            for j, unit, source, free in neighbour_candidates(row, picks, widths, k):
+                known = [job_key(q.unit, None) for q in row[j]] + [start_of(c) for c in tried[j]]
+                known += [job_key(u, f) for u, _, f in jobs.get(j, [])]
+                if tie_sets[j]["best_standard_error_percent"] is not None and job_key(unit, free) not in known:
+                    jobs.setdefault(j, []).append((unit, source, free))
+        if not jobs:
+            break
+        found = score({j: [(u, f) for u, _, f in jobs[j]] for j in sorted(jobs)})
+        for j in sorted(jobs):
+            tried[j] += [{**point, "source": source, "pass": pass_}
+                         for point, (_, source, _) in zip(found[j], jobs[j])]
+        row = row_points(spaces, [{**t, "points": points_of(t, c)} for t, c in zip(tie_sets, tried)])
+        if row_turns(row, steadiest(row)) >= now:
+            break
+    return tried
+
+
+def sweep_block(tie: dict, pick: int, search_pick_verified: Optional[dict], before: int, after: int,
+                repair_block: dict) -> dict:
+    """What the sweep did to a cell (`detail["sweep"]`): its pick among its points (`points_of`), whether
+    that moved the cell off the search's pick, the search pick's own verification when it did, the row's
+    reversals over the targets' sizes along the search's picks and along the sweep's, and the repair's
+    candidates of the cell."""
     return {"rule": RULE, "pick": pick, "moved": pick != tie["search_pick"], "at_best": pick == tie["best"],
             "row_reversals_search": before, "row_reversals_swept": after,
-            "search_pick_verified": search_pick_verified}
+            "search_pick_verified": search_pick_verified, "repair": repair_block}
 
 
-def current_pick(detail: dict) -> Optional[int]:
-    """The index in the tie set of the point the record is verified at (None: none of them)."""
-    for i, point in enumerate(detail["tie_set"]["points"]):
-        if point["unit_settings"] == detail["unit_settings"]:
-            return i
-    return None
+def repair_block(spec, detail: dict, candidates: list[dict]) -> dict:
+    """The repair's record of a cell: its scored candidates and their simulations (each candidate's re-score
+    rounds, and a steady slice's search)."""
+    evaluations = sum(detail["rescores"] + c.get("slice_evaluations", 0) for c in candidates)
+    return {"rule": REPAIR_RULE, "candidates": candidates, "simulations": evaluations * spec.draws}
+
+
+def candidates_of(detail: dict) -> list[dict]:
+    """The repair's candidates recorded in a cell's sweep block (none before a sweep)."""
+    return ((detail["sweep"] or {}).get("repair") or {}).get("candidates", [])
 
 
 def verified_figures(row: dict) -> dict:
@@ -132,29 +232,33 @@ def verified_figures(row: dict) -> dict:
     return {k: row[k] for k in keys}
 
 
-def swept_record(spec, cell, record: dict, pick: int, before: int, after: int) -> dict:
-    """`record` with the sweep's `pick`: the same record with its sweep block when the pick is the point it
-    is verified at; otherwise the pick verified on the cell's own verification seeds (the search pick's
-    verified figures kept in the block), its simulations and wall time added to the cell's."""
+def swept_record(spec, cell, record: dict, pick: int, before: int, after: int, candidates: Sequence[dict] = (),
+                 repair_wall_s: float = 0.0) -> dict:
+    """`record` with the sweep's `pick` among the tie set and the tied `candidates`: the same verification
+    when the pick is the point it is verified at; otherwise the pick verified on the cell's own verification
+    seeds (the search pick's verified figures kept in the block). Its simulations: the search's, the
+    repair's and one verification, two when moved off the search pick; `repair_wall_s` (the repair's new
+    scoring) and a new verification's time are added to its wall time."""
     import time
 
     from spreadgym.agents.chart.search import verified_record
 
     detail, row = record["detail"], record["row"]
     tie = detail["tie_set"]
+    point = points_of(tie, candidates)[pick]
     kept = (detail["sweep"] or {}).get("search_pick_verified")
     if kept is None and detail["unit_settings"] == tie["points"][tie["search_pick"]]["unit_settings"]:
         kept = verified_figures(row)
-    if current_pick(detail) == pick:
-        block = sweep_block(tie, pick, kept if pick != tie["search_pick"] else None, before, after)
-        return {"row": row, "detail": {**detail, "sweep": block}}
-    point = tie["points"][pick]
+    repaired = repair_block(spec, detail, list(candidates))
+    block = sweep_block(tie, pick, kept if pick != tie["search_pick"] else None, before, after, repaired)
+    simulations = (detail["search_evaluations"] * spec.draws + repaired["simulations"]
+                   + spec.verify_simulations * (1 if pick == tie["search_pick"] else 2))
+    if detail["unit_settings"] == point["unit_settings"]:
+        return {"row": {**row, "simulations": simulations, "wall_s": row["wall_s"] + repair_wall_s},
+                "detail": {**detail, "sweep": block}}
     base = {k: detail[k] for k in ("key", "search_unit_settings", "objective", "method", "search_evaluations",
                                    "rescores", "ties", "tie_set")}
-    base["sweep"] = sweep_block(tie, pick, kept if pick != tie["search_pick"] else None, before, after)
-    # the new verification's runs and time come on top of the search's and the search pick's verification
-    # (a record already moved by an earlier sweep counts that pick's verification once, not again)
-    simulations = row["simulations"] - (spec.verify_simulations if current_pick(detail) != tie["search_pick"] else 0)
+    base["sweep"] = block
     return verified_record(spec, cell, np.asarray(point["unit_settings"], dtype=float), point["cv_search_percent"],
-                           point["cv_search_standard_error_percent"], simulations, base,
-                           time.perf_counter() - row["wall_s"])
+                           point["cv_search_standard_error_percent"], simulations - spec.verify_simulations, base,
+                           time.perf_counter() - row["wall_s"] - repair_wall_s)

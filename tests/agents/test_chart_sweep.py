@@ -13,7 +13,17 @@ from spreadgym.agents.chart import make_spec, run_chart
 from spreadgym.agents.chart.quality import chart_quality
 from spreadgym.agents.chart.search import verified_record
 from spreadgym.agents.chart.store import record_problem
-from spreadgym.agents.chart.sweep import Point, row_turns, steadiest, step, swept_record
+from spreadgym.agents.chart.sweep import (
+    Point,
+    points_of,
+    repair,
+    row_points,
+    row_turns,
+    steadiest,
+    step,
+    swept_record,
+    turning,
+)
 
 FERTILIZER = "compound-10-16-10"
 
@@ -218,3 +228,157 @@ def test_the_same_spec_gives_the_same_swept_chart_on_ray(chart, tmp_path):
     assert without_wall(on_ray.payload["rows"]) == without_wall(result.payload["rows"])
     assert [c["sweep"] for c in on_ray.payload["cells"]] == [c["sweep"] for c in result.payload["cells"]]
     assert on_ray.payload["cells"][0]["sweep"]["moved"]
+
+
+class _Space:
+    """The settings space of `point`: unit settings back to rpm and pitch."""
+
+    @staticmethod
+    def values(unit):
+        return {"rpm": 650.0 + 450.0 * unit[0], "pitch_deg": 30.0 * unit[1]}
+
+
+def tie(*points, se=0.1):
+    """A tie set of `points` (rpm, pitch, score), the first the best and the search pick."""
+    return {"points": [{"unit_settings": list(point(rpm, pitch).unit), "score_percent": score,
+                        "cv_search_percent": score, "cv_search_standard_error_percent": se}
+                       for rpm, pitch, score in points], "best": 0, "search_pick": 0,
+            "best_standard_error_percent": se}
+
+
+def fake_score(tied):
+    """A repair scorer: a candidate is tied when `tied(cell, rpm, pitch)`; it records what it was asked."""
+    asked = []
+
+    def score(jobs):
+        asked.append(jobs)
+        out = {}
+        for k, wanted in jobs.items():
+            out[k] = []
+            for u, free in wanted:
+                values = _Space.values(u)
+                start = {} if free is None else {"start_unit_settings": u, "free_axes": free, "slice_evaluations": 13}
+                out[k].append({"unit_settings": u, "score_percent": 1.0, "cv_search_percent": 1.0,
+                               "cv_search_standard_error_percent": 0.1,
+                               "tied": bool(tied(k, values["rpm"], values["pitch_deg"])), **start})
+        return out
+
+    return score, asked
+
+
+def _picks(tie_sets, tried):
+    row = row_points([_Space] * len(tie_sets), [{**t, "points": points_of(t, c)} for t, c in zip(tie_sets, tried)])
+    picks = steadiest(row)
+    return row, picks
+
+
+def test_the_repair_removes_a_reversal_that_one_point_tie_sets_force():
+    # 4 m ties one point at 1000 rpm between 800 and 850 (a 15 % turn the sweep cannot avoid); scored at its
+    # neighbours' points and their interpolation, the two at or under 900 rpm tie: the row no longer turns
+    widths = [3.0, 3.5, 4.0, 4.5]
+    tie_sets = [tie((780, 10, 1.0)), tie((800, 10, 1.0)), tie((1000, 10, 1.0)), tie((850, 10, 1.0))]
+    row, picks = _picks(tie_sets, [[]] * 4)
+    assert row_turns(row, picks) == 1 and turning(row, picks) == [2]
+    score, asked = fake_score(lambda k, rpm, pitch: k == 2 and rpm <= 900)
+    tried = repair([_Space] * 4, widths, tie_sets, score)
+    assert [c["source"] for c in tried[2]] == ["narrower", "wider", "between", "slice"]
+    assert [round(_Space.values(c["unit_settings"])["rpm"], 6) for c in tried[2]] == [800, 850, 825, 825]
+    assert asked[0][2][3][1] == [1]  # the steady slice keeps the turning rpm and searches the pitch
+    assert [c["source"] for c in tried[1]] == ["wider"] and [c["source"] for c in tried[3]] == ["narrower"]
+    assert tried[0] == [] and len(asked) == 1  # one pass: the row is steady after it
+    row, picks = _picks(tie_sets, tried)
+    assert row_turns(row, picks) == 0 and picks[2] >= 1  # 4 m moved to a tied candidate
+
+
+def test_the_repair_scores_nothing_on_a_steady_row_or_without_rounds():
+    score, asked = fake_score(lambda *a: True)
+    steady = [tie((800, 10, 1.0)), tie((900, 12, 1.0), (700, 0, 1.1)), tie((1000, 14, 1.0))]
+    assert repair([_Space] * 3, [3.0, 4.0, 5.0], steady, score) == [[], [], []] and asked == []
+    unscored = [tie((800, 10, 1.0), se=None), tie((1000, 10, 1.0), se=None), tie((850, 10, 1.0), se=None)]
+    assert repair([_Space] * 3, [3.0, 4.0, 5.0], unscored, score) == [[], [], []] and asked == []
+
+
+def test_the_repair_stops_when_a_pass_does_not_help():
+    tie_sets = [tie((800, 10, 1.0)), tie((1000, 10, 1.0)), tie((850, 10, 1.0))]
+    score, asked = fake_score(lambda *a: False)  # nothing ties: one pass, then stop
+    tried = repair([_Space] * 3, [3.0, 4.0, 5.0], tie_sets, score)
+    assert len(asked) == 1 and len(tried[1]) == 4 and not any(c["tied"] for cells in tried for c in cells)
+
+
+@pytest.fixture(scope="module")
+def repaired(tmp_path_factory):
+    """A 7-width chart (seed 2) whose sweep leaves a reversal when every turn counts (the targets' sizes set to
+    zero), with every repair candidate declared tied (the real scores, the tie flag forced): the repair moves
+    a cell off its tie set."""
+    import spreadgym.agents.chart.quality as quality
+    import spreadgym.agents.chart.runner as runner
+
+    real = runner.score_candidates
+
+    def all_tied(*args):
+        points, wall = real(*args)
+        return [{**p, "tied": True} for p in points], wall
+
+    out = tmp_path_factory.mktemp("repaired")
+    spec = make_spec("paper", FERTILIZER, "3:6:0.5", seed=2, **{**SMALL, "verify_model": "analytic"})[0]
+    patch = pytest.MonkeyPatch()
+    patch.setattr(runner, "score_candidates", all_tied)
+    patch.setattr(quality, "RPM_REVERSAL", 0.0)
+    patch.setattr(quality, "PITCH_REVERSAL_DEG", 0.0)
+    try:
+        result = run_chart(spec, out, engine="local", progress=False)
+    finally:
+        patch.undo()
+    return spec, out, result
+
+
+def test_a_repaired_cell_is_verified_on_its_own_seeds_and_resumes_unchanged(repaired):
+    from spreadgym.agents.chart.runner import sweep_rows
+    from spreadgym.agents.chart.store import ChartStore
+
+    spec, out, result = repaired
+    cells = result.payload["cells"]
+    blocks = [c["sweep"] for c in cells]
+    assert blocks[0]["row_reversals_search"] == 1 and blocks[0]["row_reversals_swept"] == 0
+    assert any(b["repair"]["candidates"] for b in blocks)
+    moved = [k for k, c in enumerate(cells) if c["sweep"]["pick"] >= len(c["tie_set"]["points"])]
+    assert moved, "the repair moved no cell to a candidate"
+    records = _records(out, spec)
+    for k in moved:
+        cell, record = spec.cells[k], records[spec.cells[k].key]
+        candidate = points_of(cells[k]["tie_set"], cells[k]["sweep"]["repair"]["candidates"])[cells[k]["sweep"]["pick"]]
+        fresh = verified_record(spec, cell, np.asarray(candidate["unit_settings"]), 0.0, None, 0, {}, 0.0)
+        assert _figures(record) == _figures(fresh) and record_problem(spec, cell, record) is None
+        candidates = cells[k]["sweep"]["repair"]["candidates"]
+        repair_runs = sum(cells[k]["rescores"] + c.get("slice_evaluations", 0) for c in candidates) * 4
+        assert repair_runs == cells[k]["sweep"]["repair"]["simulations"] > 0
+        runs = cells[k]["search_evaluations"] * 4 + repair_runs + 2 * spec.verify_simulations
+        assert record["row"]["simulations"] == runs
+        assert record["row"]["simulations"] <= spec.max_simulations
+    # resumed (the real scorer now): every candidate is found in the records, nothing is scored or changes
+    import spreadgym.agents.chart.quality as quality
+    import spreadgym.agents.chart.runner as runner
+
+    again = json.loads(json.dumps(records))
+    patch = pytest.MonkeyPatch()
+    patch.setattr(runner, "score_candidates", lambda *a: pytest.fail("a recorded candidate was scored again"))
+    patch.setattr(quality, "RPM_REVERSAL", 0.0)
+    patch.setattr(quality, "PITCH_REVERSAL_DEG", 0.0)
+    try:
+        sweep_rows(spec, ChartStore(out, spec), records)
+    finally:
+        patch.undo()
+    assert json.loads(json.dumps(records)) == again
+
+
+def test_the_repair_scores_a_candidate_on_the_cells_own_rounds(repaired):
+    """A candidate's score is its re-score rounds' mean, on the tie set's draws: the tie set's own points score
+    what the search recorded for them."""
+    from spreadgym.agents.chart.search import score_candidates
+
+    spec, out, result = repaired
+    cell, detail = spec.cells[1], result.payload["cells"][1]
+    points, _ = score_candidates(spec, cell, detail, [(p["unit_settings"], None) for p in detail["tie_set"]["points"]])
+    assert [p["score_percent"] for p in points] == [p["score_percent"] for p in detail["tie_set"]["points"]]
+    assert [p["cv_search_percent"] for p in points] == [p["cv_search_percent"] for p in detail["tie_set"]["points"]]
+    assert all(p["tied"] for p in points)
