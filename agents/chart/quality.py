@@ -95,9 +95,10 @@ def _paired(after: list[float], before: list[float]) -> dict:
 
 
 def sweep_effect(payload: dict) -> dict:
-    """What the row sweep did to a finished chart: the cells it moved, the reversals over the targets'
-    sizes before (at the search picks) and after, and the paired cost in verified nominal CV and p90
-    (after - before, percentage points, over every cell and over the moved ones)."""
+    """What the row sweep and its repair did to a finished chart: the cells it moved, the reversals over the
+    targets' sizes before (at the search picks) and after, the repair's candidates (scored, tied) and
+    simulations, and the paired cost in verified nominal CV and p90 (after - before, percentage points,
+    over every cell and over the moved ones)."""
     before_rows = search_pick_rows(payload)
     before = chart_quality({**payload, "rows": before_rows})
     after = chart_quality(payload)
@@ -109,6 +110,10 @@ def sweep_effect(payload: dict) -> dict:
            "mean_cv_percent": (before["mean_cv_percent"], after["mean_cv_percent"]),
            "mean_cv_p90_percent": (before["mean_cv_p90_percent"], after["mean_cv_p90_percent"]),
            "reversals": (before["reversals"], after["reversals"])}
+    repairs = [(c["sweep"] or {}).get("repair") or {} for c in payload["cells"]]
+    out["repair"] = {"candidates": sum(len(r.get("candidates", [])) for r in repairs),
+                     "tied": sum(c["tied"] for r in repairs for c in r.get("candidates", [])),
+                     "simulations": sum(r.get("simulations", 0) for r in repairs)}
     for key in ("cv_percent", "cv_p90_percent"):
         out[f"{key}_cost"] = _paired([r[key] for r in rows], [r[key] for r in before_rows])
         if moved:

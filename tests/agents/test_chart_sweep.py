@@ -341,6 +341,11 @@ def test_a_repaired_cell_is_verified_on_its_own_seeds_and_resumes_unchanged(repa
     blocks = [c["sweep"] for c in cells]
     assert blocks[0]["row_reversals_search"] == 1 and blocks[0]["row_reversals_swept"] == 0
     assert any(b["repair"]["candidates"] for b in blocks)
+    from spreadgym.agents.chart.quality import sweep_effect
+
+    effect = sweep_effect(result.payload)["repair"]
+    assert effect["tied"] == effect["candidates"] == sum(len(b["repair"]["candidates"]) for b in blocks)
+    assert effect["simulations"] == sum(b["repair"]["simulations"] for b in blocks)
     moved = [k for k, c in enumerate(cells) if c["sweep"]["pick"] >= len(c["tie_set"]["points"])]
     assert moved, "the repair moved no cell to a candidate"
     records = _records(out, spec)
