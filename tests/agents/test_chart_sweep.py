@@ -387,3 +387,22 @@ def test_the_repair_scores_a_candidate_on_the_cells_own_rounds(repaired):
     assert [p["score_percent"] for p in points] == [p["score_percent"] for p in detail["tie_set"]["points"]]
     assert [p["cv_search_percent"] for p in points] == [p["cv_search_percent"] for p in detail["tie_set"]["points"]]
     assert all(p["tied"] for p in points)
+
+
+def test_the_repair_gives_the_same_chart_on_ray_as_in_process(tmp_path, monkeypatch):
+    """The repair's candidates scored as Ray tasks (one worker) give the in-process chart: candidates, ties,
+    picks and rows (every turn counts, so that the row has one to repair)."""
+    import spreadgym.agents.chart.quality as quality
+
+    monkeypatch.setattr(quality, "RPM_REVERSAL", 0.0)
+    monkeypatch.setattr(quality, "PITCH_REVERSAL_DEG", 0.0)
+    spec = make_spec("paper", FERTILIZER, "3:6:0.5", seed=2, **{**SMALL, "verify_model": "analytic"})[0]
+    here = run_chart(spec, tmp_path / "here", engine="local", progress=False)
+    on_ray = run_chart(spec, tmp_path / "ray", engine="ray", workers=1, progress=False)
+
+    def without_wall(rows):
+        return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+
+    assert any(c["sweep"]["repair"]["candidates"] for c in here.payload["cells"])
+    assert without_wall(on_ray.payload["rows"]) == without_wall(here.payload["rows"])
+    assert [c["sweep"] for c in on_ray.payload["cells"]] == [c["sweep"] for c in here.payload["cells"]]
