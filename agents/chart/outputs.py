@@ -124,9 +124,12 @@ def method_text(spec: ChartSpec) -> str:
               f"per cell, aiming at {aim})")
     if spec.method == "policy":
         return "Settings proposed by a trained policy (no search)"
+    steady = ("" if spec.steady_tolerance_pp == 0.0 else
+              f"; steady rows chosen among settings within two standard errors of each cell's best plus "
+              f"{spec.steady_tolerance_pp:g} pp (--steady-tolerance-pp), a wider tie than the default")
     if spec.method == "policy+search":
-        return f"Settings found by {search}, started at a trained policy's proposal"
-    return f"Settings found by {search}"
+        return f"Settings found by {search}, started at a trained policy's proposal{steady}"
+    return f"Settings found by {search}{steady}"
 
 
 PRINT_CSS = """

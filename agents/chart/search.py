@@ -168,7 +168,8 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
     means = scores[:, :, 0].mean(axis=1)
     best = int(np.argmin(means))
     best_se = float(scores[best, :, 0].std(ddof=1) / math.sqrt(rounds))
-    ties = [i for i in range(len(kept)) if means[i] <= means[best] + TIE_STANDARD_ERRORS * best_se]
+    limit = tie_limit(float(means[best]), best_se, spec.steady_tolerance_pp)
+    ties = [i for i in range(len(kept)) if means[i] <= limit]
     pick = best if neighbour is None else min(ties, key=lambda i: (float(np.linalg.norm(kept[i] - neighbour)),
                                                                    means[i]))
     cv_se = [float(scores[i, :, 1].std(ddof=1) / math.sqrt(rounds)) for i in range(len(kept))]
@@ -215,8 +216,8 @@ def slice_search(scorer: Scorer, start: np.ndarray, free: list) -> tuple[np.ndar
 def score_candidates(spec: ChartSpec, cell: Cell, detail: dict, jobs: list) -> tuple[list[dict], float]:
     """The row repair's candidates of a cell, `jobs` of (unit settings, free axes or None): a steady slice
     (free axes given) searched first (`slice_search`); each re-scored on the cell's own re-score rounds (the
-    tie set's common random numbers). (A tie point with `tied` (within TIE_STANDARD_ERRORS of the tie set's
-    best, the chain's rule) per job, the wall time.)"""
+    tie set's common random numbers). (A tie point with `tied` (`tie_limit`: within TIE_STANDARD_ERRORS of the
+    tie set's best plus the spec's steady tolerance, the chain's rule) per job, the wall time.)"""
     started = time.perf_counter()
     scorer = Scorer(spec, cell, cell_seed(spec.seed, cell).spawn(5)[0])
     units, extra = [], []
@@ -232,13 +233,21 @@ def score_candidates(spec: ChartSpec, cell: Cell, detail: dict, jobs: list) -> t
     rounds = detail["rescores"]
     scores = rescore(scorer, units, rounds)
     tie = detail["tie_set"]
-    limit = tie["points"][tie["best"]]["score_percent"] + TIE_STANDARD_ERRORS * tie["best_standard_error_percent"]
+    limit = tie_limit(tie["points"][tie["best"]]["score_percent"], tie["best_standard_error_percent"],
+                      spec.steady_tolerance_pp)
     out = []
     for unit, score, more in zip(units, scores, extra):
         mean = float(score[:, 0].mean())
         point = tie_point(unit, mean, float(score[:, 1].mean()), float(score[:, 1].std(ddof=1) / math.sqrt(rounds)))
         out.append({**point, "tied": mean <= limit, **more})
     return out, time.perf_counter() - started
+
+
+def tie_limit(best: float, best_se: float, tolerance_pp: float = 0.0) -> float:
+    """The highest mean score that ties with the best: TIE_STANDARD_ERRORS of its standard error above it, plus
+    `tolerance_pp` percentage points of the objective (`--steady-tolerance-pp`; 0, the default, adds nothing:
+    the same limit to the bit)."""
+    return best + TIE_STANDARD_ERRORS * best_se + tolerance_pp
 
 
 def tie_point(x: np.ndarray, score: Optional[float], cv: Optional[float], cv_se: Optional[float]) -> dict:

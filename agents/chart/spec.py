@@ -33,6 +33,7 @@ MAX_PROBES = 32
 MAX_BUDGET = 100_000  # simulations per cell: days of work already; beyond it only memory runs out
 MAX_WIDTHS = 2000  # every multiple of the finest tray (0.05 m) up to 100 m
 MAX_WIDTH_M = 100.0
+MAX_STEADY_TOLERANCE_PP = 100.0  # a tolerance this wide ties every point of any chart cell
 OBJECTIVES = ("robust", "nominal")  # robust: the search minimises the variability model's quantile
 METHODS = ("cmaes", "policy", "policy+search")
 
@@ -70,6 +71,7 @@ class ChartSpec:
     policy: Optional[str] = None  # the policy file (method policy, policy+search)
     policy_sha256: Optional[str] = None  # its content, so a changed policy is noticed on resume
     variability: dict = field(default_factory=check_variability)  # the checked variability model
+    steady_tolerance_pp: float = 0.0  # widens the tie test: within 2 SE of the best plus this many pp (sweep.py)
 
     @property
     def cells(self) -> list[Cell]:
@@ -104,7 +106,10 @@ class ChartSpec:
         return (self.budget + REPAIR_PASSES * per_pass) * self.draws + 2 * self.verify_simulations
 
     def manifest(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+        """The spec as the chart folder and chart.json record it; `steady_tolerance_pp` only when non-zero, so a
+        chart of the default rule has the manifest it had before the option (and resumes as it did)."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()
+                if k != "steady_tolerance_pp" or v != 0.0}
 
     def base_scene(self) -> Scene:
         return scene_from_dict(self.scene)
@@ -207,12 +212,14 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
               granules: Optional[int] = None, seed: int = 0, search_model: str = SEARCH_MODEL,
               verify_model: str = VERIFY_MODEL, verify_runs: int = VERIFY_RUNS, settings: Optional[dict] = None,
               objective: str = "robust", method: str = "cmaes", policy: Optional[str] = None, variability=None,
-              library: Optional[MaterialLibrary] = None) -> tuple[ChartSpec, list[str]]:
+              library: Optional[MaterialLibrary] = None,
+              steady_tolerance_pp: float = 0.0) -> tuple[ChartSpec, list[str]]:
     """A checked ChartSpec and notes for people. Every problem is a SpreadgymError naming
     the flag or key: unknown fertilizer or model, width off the tray grid or beyond what
     the scene can throw, budget or granules below 1, settings ranges out of bounds, an
-    unknown objective or method, a policy given without a policy method or missing where
-    the scene has no shipped one (`policy.shipped_policy`), a variability entry out of range."""
+    unknown objective or method, a steady tolerance not a number in [0, 100] pp, a policy
+    given without a policy method or missing where the scene has no shipped one
+    (`policy.shipped_policy`), a variability entry out of range."""
     library = library or load_library()
     if objective not in OBJECTIVES:
         raise SpreadgymError(f"--objective: {brief(objective)}; allowed: {', '.join(OBJECTIVES)}")
@@ -221,6 +228,7 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
     if policy is not None and not method.startswith("policy"):
         raise SpreadgymError(f"--policy: not used by --method {method}")
     variability = check_variability(variability)
+    steady_tolerance_pp = check_steady_tolerance(steady_tolerance_pp)
     base = load_scene(scene)
     if not 1 <= int(budget) <= MAX_BUDGET:
         raise SpreadgymError(f"--budget: {budget} is out of range; allowed [1, {MAX_BUDGET}] simulations")
@@ -249,7 +257,7 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
         policy, digest = check_policy(shipped_policy(base, method) if policy is None else policy, base)
     spec = ChartSpec(base.model_dump(mode="json"), names, tuple(sorted(widths_m)), driving, int(budget), granules,
                      int(seed), search_model, verify_model, int(verify_runs), settings, objective, method, policy,
-                     digest, variability)
+                     digest, variability, steady_tolerance_pp)
     try:
         scene = spec.cell_scene(spec.cells[0])
         check_pooled_work(scene, spec.verify_runs, "--granules")
@@ -266,6 +274,18 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
             raise SpreadgymError(f"--widths: {too_wide[0]:g} m is beyond what the scene can throw {name}: the widest "
                                  f"single-pass pattern within the settings' ranges is {reach:g} m")
     return spec, notes
+
+
+def check_steady_tolerance(value) -> float:
+    """`--steady-tolerance-pp`: a finite number of percentage points in [0, MAX_STEADY_TOLERANCE_PP]."""
+    try:
+        number = float(value) if not isinstance(value, (bool, str)) else float("nan")
+    except (TypeError, ValueError):
+        number = float("nan")
+    if not (math.isfinite(number) and 0.0 <= number <= MAX_STEADY_TOLERANCE_PP):
+        raise SpreadgymError(f"--steady-tolerance-pp: {brief(value)} is not allowed; allowed: a number in "
+                             f"[0, {MAX_STEADY_TOLERANCE_PP:g}] percentage points")
+    return number
 
 
 def widest_pattern_m(spec: ChartSpec, space: SettingsSpace, fertilizer: str, library: MaterialLibrary) -> float:

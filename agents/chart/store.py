@@ -72,14 +72,18 @@ def _plain(payload):
     return json.loads(json_text(payload))
 
 
+MANIFEST_DEFAULTS = {"steady_tolerance_pp": 0.0}  # a manifest leaves these out at their defaults
+
+
 def _changes(stored: dict, wanted: dict) -> list[str]:
     changed = []
     for key in sorted(set(stored) | set(wanted)):
-        if stored.get(key) != wanted.get(key):
+        before, after = (m.get(key, MANIFEST_DEFAULTS.get(key)) for m in (stored, wanted))
+        if before != after:
             if key == "scene":
                 changed.append("the scene")
             else:
-                changed.append(f"{key} {brief(stored.get(key))} -> {brief(wanted.get(key))}")
+                changed.append(f"{key} {brief(before)} -> {brief(after)}")
     return changed
 
 

@@ -2,7 +2,8 @@
 cell so that the row is as steady as the ties allow.
 
 A cell's tie set (`search.search`) holds the re-scored points whose mean score is within
-`TIE_STANDARD_ERRORS` standard errors of the best's (the best among them; with
+`TIE_STANDARD_ERRORS` standard errors of the best's, plus the spec's `steady_tolerance_pp`
+percentage points of the objective (`--steady-tolerance-pp`, default 0; `search.tie_limit`) (the best among them; with
 `policy+search` the policy's proposal and the narrower neighbour's settings are re-scored
 too; with `policy`, or a budget too small to re-score, the set is the cell's one point).
 Among all paths that take one tied point per cell, the sweep chooses, lexicographically:
@@ -27,7 +28,7 @@ interpolation at its width and the steady slice's best point (the interpolation'
 turning settings kept, each other setting searched on a grid along its axis) as
 candidates, each neighbour the turning cell's point; the caller scores them on the
 cell's own re-score rounds (the tie set's common random numbers) and marks those within
-two standard errors of the cell's best as tied; the tied ones join the tie sets and the
+two standard errors of the cell's best (plus the steady tolerance) as tied; the tied ones join the tie sets and the
 sweep runs again. At most `REPAIR_PASSES` passes, and only
 while a pass lowers the row's reversals; a candidate is scored once per cell.
 """
@@ -52,6 +53,24 @@ REPAIR_PASSES = 3  # passes of candidates, each only while the last one lowered 
 REPAIR_CANDIDATES = 6  # most candidates of a cell in one pass (4 as a turning cell, 1 as each turn's neighbour)
 SLICE_POINTS = 9  # the steady slice's grid along each searched axis (ends included), then SLICE_REFINE around its best
 SLICE_REFINE = (-0.5, -0.25, 0.25, 0.5)  # in grid steps
+
+
+def tolerance_text(tolerance_pp: float) -> str:
+    """What `--steady-tolerance-pp` adds to the rule's words ('' at 0, the default: the text is as it was)."""
+    return "" if tolerance_pp == 0.0 else f" plus a steady tolerance of {tolerance_pp:g} pp of the objective"
+
+
+def rule(tolerance_pp: float = 0.0) -> str:
+    """The sweep's rule (RULE; the tie test widened by a non-zero steady tolerance)."""
+    if tolerance_pp == 0.0:
+        return RULE
+    return RULE + f" (tied: within two standard errors of the cell's best{tolerance_text(tolerance_pp)})"
+
+
+def repair_rule(tolerance_pp: float = 0.0) -> str:
+    """The repair's rule (REPAIR_RULE; the tie test widened by a non-zero steady tolerance)."""
+    return REPAIR_RULE.replace("two standard errors of the cell's best",
+                               "two standard errors of the cell's best" + tolerance_text(tolerance_pp))
 
 
 @dataclass(frozen=True)
@@ -203,12 +222,13 @@ def repair(spaces: Sequence, widths: Sequence[float], tie_sets: Sequence[dict],
 
 
 def sweep_block(tie: dict, pick: int, search_pick_verified: Optional[dict], before: int, after: int,
-                repair_block: dict) -> dict:
+                repair_block: dict, tolerance_pp: float = 0.0) -> dict:
     """What the sweep did to a cell (`detail["sweep"]`): its pick among its points (`points_of`), whether
     that moved the cell off the search's pick, the search pick's own verification when it did, the row's
     reversals over the targets' sizes along the search's picks and along the sweep's, and the repair's
     candidates of the cell."""
-    return {"rule": RULE, "pick": pick, "moved": pick != tie["search_pick"], "at_best": pick == tie["best"],
+    return {"rule": rule(tolerance_pp), "pick": pick, "moved": pick != tie["search_pick"],
+            "at_best": pick == tie["best"],
             "row_reversals_search": before, "row_reversals_swept": after,
             "search_pick_verified": search_pick_verified, "repair": repair_block}
 
@@ -217,7 +237,8 @@ def repair_block(spec, detail: dict, candidates: list[dict]) -> dict:
     """The repair's record of a cell: its scored candidates and their simulations (each candidate's re-score
     rounds, and a steady slice's search)."""
     evaluations = sum(detail["rescores"] + c.get("slice_evaluations", 0) for c in candidates)
-    return {"rule": REPAIR_RULE, "candidates": candidates, "simulations": evaluations * spec.draws}
+    return {"rule": repair_rule(spec.steady_tolerance_pp), "candidates": candidates,
+            "simulations": evaluations * spec.draws}
 
 
 def candidates_of(detail: dict) -> list[dict]:
@@ -250,7 +271,8 @@ def swept_record(spec, cell, record: dict, pick: int, before: int, after: int, c
     if kept is None and detail["unit_settings"] == tie["points"][tie["search_pick"]]["unit_settings"]:
         kept = verified_figures(row)
     repaired = repair_block(spec, detail, list(candidates))
-    block = sweep_block(tie, pick, kept if pick != tie["search_pick"] else None, before, after, repaired)
+    block = sweep_block(tie, pick, kept if pick != tie["search_pick"] else None, before, after, repaired,
+                        spec.steady_tolerance_pp)
     simulations = (detail["search_evaluations"] * spec.draws + repaired["simulations"]
                    + spec.verify_simulations * (1 if pick == tie["search_pick"] else 2))
     if detail["unit_settings"] == point["unit_settings"]:

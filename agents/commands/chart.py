@@ -15,7 +15,7 @@ DRIVING = ("racetrack", "back-and-forth")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
-    from spreadgym.agents.chart.spec import MAX_BUDGET, METHODS, OBJECTIVES, VERIFY_MODEL
+    from spreadgym.agents.chart.spec import MAX_BUDGET, MAX_STEADY_TOLERANCE_PP, METHODS, OBJECTIVES, VERIFY_MODEL
     from spreadgym.physics.selection import MODELS
 
     parser.add_argument("--scene", required=True, metavar="S", help="shipped scene name or a YAML path")
@@ -56,6 +56,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--variability", metavar="FILE",
                         help="a YAML file with a 'variability:' section over the defaults "
                              "(configs/chart_variability.yaml)")
+    parser.add_argument("--steady-tolerance-pp", type=arguments.real(0.0, MAX_STEADY_TOLERANCE_PP), default=0.0,
+                        metavar="X",
+                        help="steady rows: a point ties with a cell's best when its mean score is within two "
+                             "standard errors of it plus X percentage points of the objective; a wider tie set "
+                             "lets the row sweep remove reversals at a price in CV (docs/charts.md; default 0: "
+                             "the two-standard-error rule)")
     parser.add_argument("--json", action="store_true", help="print chart.json on stdout")
 
 
@@ -67,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving, budget=args.budget,
                    granules=args.granules, seed=args.seed, workers=args.workers, address=args.address,
                    method=args.method, objective=args.objective, policy=args.policy, variability=args.variability,
-                   verify_model=args.verify_model)
+                   verify_model=args.verify_model, steady_tolerance_pp=args.steady_tolerance_pp)
     for key, problem in result.replaced.items():
         print(f"cells/{key}.json was not its cell's record ({problem}): computed again", file=sys.stderr)
     if args.json:

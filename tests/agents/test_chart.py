@@ -116,6 +116,7 @@ def test_interrupted_chart_keeps_finished_cells_and_resumes_without_redoing_them
     ({"budget": 7}, "budget 6 -> 7"),
     ({"driving": "back-and-forth"}, "driving 'racetrack' -> 'back-and-forth'"),
     ({"widths": "3,4,5"}, "widths_m"),
+    ({"steady_tolerance_pp": 1.5}, "steady_tolerance_pp 0.0 -> 1.5"),
 ])
 def test_a_changed_flag_is_refused_not_mixed(chart, changes, message):
     out, _ = chart
@@ -160,6 +161,10 @@ BASE = ["chart", "--scene", "paper", "--fertilizers", FERTILIZER, "--widths", "3
     (["--fertilizers", "all,pellet"], "--fertilizers: 'all' stands alone"),
     (["--granules", "100000"], "--granules: 8 runs x 3200000 landing points per run"),
     (["--workers", "100000"], "--workers: 100000 is more than the"),
+    (["--steady-tolerance-pp", "-1"], "--steady-tolerance-pp: -1 is out of range; allowed: [0, 100]"),
+    (["--steady-tolerance-pp", "nan"], "--steady-tolerance-pp: nan is out of range"),
+    (["--steady-tolerance-pp", "inf"], "--steady-tolerance-pp: inf is out of range"),
+    (["--steady-tolerance-pp", "two"], "--steady-tolerance-pp: 'two' is not a number"),
 ])
 def test_bad_input_is_one_line_and_exit_2_with_nothing_written(argv, message, tmp_path, capsys):
     out = tmp_path / "out"

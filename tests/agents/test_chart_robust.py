@@ -102,7 +102,7 @@ def test_the_p90_is_the_full_model_over_the_rows_settings_on_fresh_draws(tmp_pat
 
 def _fake_scorer(cost):
     """A scorer of cost(x) + round noise (common to every point of a round)."""
-    spec = SimpleNamespace(budget=40, objective="robust")
+    spec = SimpleNamespace(budget=40, objective="robust", steady_tolerance_pp=0.0)
     noise = np.random.default_rng(0).normal(0.0, 0.5, 1000)
     calls = []
 

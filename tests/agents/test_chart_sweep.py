@@ -406,3 +406,108 @@ def test_the_repair_gives_the_same_chart_on_ray_as_in_process(tmp_path, monkeypa
     assert any(c["sweep"]["repair"]["candidates"] for c in here.payload["cells"])
     assert without_wall(on_ray.payload["rows"]) == without_wall(here.payload["rows"])
     assert [c["sweep"] for c in on_ray.payload["cells"]] == [c["sweep"] for c in here.payload["cells"]]
+
+
+def scores_of(means, se=0.1, tolerance_pp=0.0):
+    """A repair scorer with known mean scores (`means(cell, rpm, pitch)`), tied by the chart's test
+    (`search.tie_limit`: the best of the hand-made tie sets scores 1.0 with standard error `se`)."""
+    from spreadgym.agents.chart.search import tie_limit
+
+    def score(jobs):
+        out = {}
+        for k, wanted in jobs.items():
+            out[k] = []
+            for u, free in wanted:
+                values = _Space.values(u)
+                mean = means(k, values["rpm"], values["pitch_deg"])
+                out[k].append({"unit_settings": u, "score_percent": mean, "cv_search_percent": mean,
+                               "cv_search_standard_error_percent": se, "tied": mean <= tie_limit(1.0, se, tolerance_pp),
+                               **({} if free is None else {"start_unit_settings": u, "free_axes": free,
+                                                          "slice_evaluations": 13})})
+        return out
+
+    return score
+
+
+def test_a_steady_tolerance_ties_a_candidate_just_outside_two_standard_errors():
+    # 4 m ties one point at 1000 rpm between 800 and 850 (a turn); every candidate of 4 m scores 1.25, just
+    # over the two standard errors (1.0 + 2 x 0.1): refused at tolerance 0, the reversal stays; a tolerance of
+    # 0.06 pp covers it: the candidates tie and the row no longer turns
+    widths = [3.0, 3.5, 4.0, 4.5]
+    tie_sets = [tie((780, 10, 1.0)), tie((800, 10, 1.0)), tie((1000, 10, 1.0)), tie((850, 10, 1.0))]
+
+    def means(k, rpm, pitch):
+        return 1.25 if k == 2 else 5.0  # the neighbours at 4 m's point: far from their best
+
+    strict = repair([_Space] * 4, widths, tie_sets, scores_of(means))
+    assert strict[2] and not any(c["tied"] for cells in strict for c in cells)
+    row, picks = _picks(tie_sets, strict)
+    assert row_turns(row, picks) == 1
+    wide = repair([_Space] * 4, widths, tie_sets, scores_of(means, tolerance_pp=0.06))
+    assert [c["unit_settings"] for c in wide[2]] == [c["unit_settings"] for c in strict[2]]
+    assert all(c["tied"] for c in wide[2]) and not any(c["tied"] for k in (1, 3) for c in wide[k])
+    row, picks = _picks(tie_sets, wide)
+    assert row_turns(row, picks) == 0 and picks[2] >= 1
+    assert not any(c["tied"] for c in repair([_Space] * 4, widths, tie_sets, scores_of(means, tolerance_pp=0.04))[2])
+
+
+def test_the_default_tolerance_is_the_two_standard_error_rule_to_the_bit():
+    from spreadgym.agents.chart.search import TIE_STANDARD_ERRORS, tie_limit
+    from spreadgym.agents.chart.sweep import REPAIR_RULE, RULE, repair_rule, rule
+
+    rng = np.random.default_rng(0)
+    for best, se in rng.uniform(0, 20, size=(200, 2)):
+        assert tie_limit(best, se) == best + TIE_STANDARD_ERRORS * se == tie_limit(np.float64(best), se, 0.0)
+    assert rule() == rule(0.0) == RULE and repair_rule(0.0) == REPAIR_RULE
+    assert "plus a steady tolerance of 1.5 pp" in rule(1.5) and "plus a steady tolerance of 1.5 pp" in repair_rule(1.5)
+
+
+def test_a_steady_tolerance_widens_a_cells_tie_set_and_its_candidates_tie(chart):
+    """The spec's tolerance reaches the search's tie set (every re-scored point within it ties) and the repair's
+    scoring (a candidate's `tied`); at 0 the cell is the chart's; the records and the rules say it."""
+    from dataclasses import replace
+
+    from spreadgym.agents.chart.search import run_cell, score_candidates
+    from spreadgym.agents.chart.sweep import rule
+
+    spec, out, _ = chart
+    records = _records(out, spec)
+    cell, previous = spec.cells[1], records[spec.cells[0].key]  # 3.5 m ties one point at 0
+    strict = records[cell.key]["detail"]
+    again = run_cell(spec, cell, previous)["detail"]
+    assert [again[k] for k in ("tie_set", "ties", "search_unit_settings")] == \
+        [strict[k] for k in ("tie_set", "ties", "search_unit_settings")]
+    wide = run_cell(replace(spec, steady_tolerance_pp=100.0), cell, previous)["detail"]
+    assert wide["tie_set"]["best_standard_error_percent"] == strict["tie_set"]["best_standard_error_percent"]
+    assert wide["ties"] > strict["ties"] and len(wide["tie_set"]["points"]) == wide["ties"]
+    best = wide["tie_set"]["points"][wide["tie_set"]["best"]]
+    assert best == strict["tie_set"]["points"][strict["tie_set"]["best"]]
+    # a candidate just outside two standard errors: tied only with a tolerance that covers its excess
+    far = [u / 2 for u in best["unit_settings"]]
+    (scored,), _ = score_candidates(spec, cell, strict, [(far, None)])
+    limit = best["score_percent"] + 2 * strict["tie_set"]["best_standard_error_percent"]
+    gap = scored["score_percent"] - limit
+    assert gap > 0 and not scored["tied"]
+    (loose,), _ = score_candidates(replace(spec, steady_tolerance_pp=gap * 1.01 + 1e-9), cell, strict, [(far, None)])
+    assert loose["tied"] and loose["score_percent"] == scored["score_percent"]
+    assert rule(1.0) != rule(0.0)
+
+
+def test_a_chart_with_a_steady_tolerance_records_it_and_resumes_only_with_it(tmp_path):
+    from spreadgym.agents.chart.outputs import markdown
+    from spreadgym.errors import SpreadgymError
+
+    spec = make_spec("paper", FERTILIZER, "3,3.5", seed=1, steady_tolerance_pp=0.5, **SMALL)[0]
+    result = run_chart(spec, tmp_path, engine="local", progress=False)
+    assert result.payload["spec"]["steady_tolerance_pp"] == 0.5
+    assert json.loads((tmp_path / "manifest.json").read_text())["steady_tolerance_pp"] == 0.5
+    assert all("0.5 pp" in c["sweep"]["rule"] and "0.5 pp" in c["sweep"]["repair"]["rule"]
+               for c in result.payload["cells"])
+    assert "plus 0.5 pp (--steady-tolerance-pp)" in markdown(spec, result.payload)
+    assert "plus 0.5 pp (--steady-tolerance-pp)" in (tmp_path / "chart.html").read_text(encoding="utf-8")
+    again = run_chart(spec, tmp_path, engine="local", progress=False)
+    assert again.computed == [] and again.payload["rows"] == result.payload["rows"]
+    default = make_spec("paper", FERTILIZER, "3,3.5", seed=1, **SMALL)[0]
+    assert "steady_tolerance_pp" not in default.manifest()
+    with pytest.raises(SpreadgymError, match="steady_tolerance_pp 0.5 -> 0.0"):
+        run_chart(default, tmp_path, engine="local", progress=False)
