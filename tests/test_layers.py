@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LAYERS = (  # lowest first; errors, report and threads are plain helpers every layer may use
-    ("spreadgym.errors", "spreadgym.report", "spreadgym.threads"),
+LAYERS = (  # lowest first; errors, report, threads and heap are plain helpers every layer may use
+    ("spreadgym.errors", "spreadgym.report", "spreadgym.threads", "spreadgym.heap"),
     ("spreadgym.config",),
     ("spreadgym.physics",),
     ("spreadgym.spread",),

@@ -26,6 +26,7 @@ import time
 from dataclasses import replace
 from typing import Optional, Sequence, Union
 
+from spreadgym import heap
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Scene
 from spreadgym.errors import ConfigError
@@ -40,6 +41,7 @@ def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[Ma
     its own `first_replicate` when a sequence is given), computed together; each result's
     `wall_s` is the batch's wall time over its size."""
     started = time.perf_counter()
+    heap.tune()
     scenes = list(scenes)
     for i, scene in enumerate(scenes):
         if not isinstance(scene, Scene):

@@ -13,6 +13,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from spreadgym import heap
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Flight, Scene
 from spreadgym.physics.analytic.deflector_rays import deflect as deflect_by_rays
@@ -105,6 +106,7 @@ def run_scene(
     spreadgym.spread.batch runs many scenes at once, with the same results.
     """
     started = time.perf_counter()
+    heap.tune()
     plan = plan_scene(scene, model, library or load_library(), first_replicate)
     departures = [run_spinner(*run, plan.chosen, progress, tracks) for run in plan.spinner_runs()]
     result = finish_scene(plan, departures, ci)
