@@ -55,7 +55,7 @@ def is_glibc() -> bool:
     """Whether the C library is glibc (whose thresholds `tune` sets)."""
     try:
         return bool(os.confstr("CS_GNU_LIBC_VERSION"))  # other C libraries raise or answer None
-    except (ValueError, OSError):
+    except (AttributeError, ValueError, OSError):  # AttributeError: no confstr (Windows)
         return False
 
 

@@ -69,3 +69,13 @@ def test_a_simulation_tunes_the_heap(call):
     clean = {k: v for k, v in os.environ.items() if k not in heap.USER_SETTINGS and k != "GLIBC_TUNABLES"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=clean)
     assert out.stdout.split() == ["None", "True"]
+
+
+@pytest.mark.parametrize("answer", [None, ValueError("unknown name"), AttributeError("no confstr")])
+def test_other_c_libraries_are_left_alone(monkeypatch, answer):
+    def confstr(name):
+        if isinstance(answer, Exception):
+            raise answer
+        return answer
+    monkeypatch.setattr(heap.os, "confstr", confstr)
+    assert not heap.is_glibc() and not heap._ours_to_set()
