@@ -3,7 +3,7 @@
 A simulation allocates and frees arrays of 0.1-20 MB per design (granule states, release-
 angle copies, landings, tray samples). glibc serves an allocation above its mmap
 threshold with fresh pages from the kernel, zero-filled on first touch, and returns freed
-heap memory above its trim threshold; both thresholds start low (128 KiB, 256 KiB) and
+heap memory above its trim threshold; both thresholds start at 128 KiB and
 rise only as large blocks happen to be freed. So a fresh process, or one whose largest
 arrays so far were smaller, pays page faults on most of its arrays, and threads fault into
 one address space one at a time. `tune()` sets the mmap threshold to 32 MiB (glibc's
