@@ -203,7 +203,7 @@ def _map(function, jobs: list, remote: bool) -> list:
     return ray.get([task.remote(*job) for job in jobs])
 
 
-def repair_row(spec: ChartSpec, cells: list, records: dict, remote: bool) -> tuple[list, list]:
+def repair_row(spec: ChartSpec, cells: list, spaces: list, records: dict, remote: bool) -> tuple[list, list]:
     """The row repair (`sweep.repair`) of one row: (each cell's scored candidates, each cell's wall time of
     the scoring done now). A candidate already in a cell's record (a resumed chart) is taken from it: scoring
     is deterministic, so that is what scoring it again would give."""
@@ -226,7 +226,6 @@ def repair_row(spec: ChartSpec, cells: list, records: dict, remote: bool) -> tup
             walls[k] += wall
         return found
 
-    spaces = [spec.space(spec.cell_scene(c)) for c in cells]
     tried = sweep.repair(spaces, [c.width_m for c in cells], [d["tie_set"] for d in details], score)
     return tried, walls
 
@@ -241,11 +240,10 @@ def sweep_rows(spec: ChartSpec, store: ChartStore, records: dict, remote: bool =
         cells = [c for c in spec.cells if c.fertilizer == fertilizer]
         if not all(c.key in records for c in cells):
             continue
-        tried, walls = repair_row(spec, cells, records, remote)
+        spaces = [spec.space(spec.cell_scene(c)) for c in cells]
+        tried, walls = repair_row(spec, cells, spaces, records, remote)
         details = [records[c.key]["detail"] for c in cells]
-        points = sweep.row_points([spec.space(spec.cell_scene(c)) for c in cells],
-                                  [{**d["tie_set"], "points": sweep.points_of(d["tie_set"], t)}
-                                   for d, t in zip(details, tried)])
+        points = sweep.row_with(spaces, [d["tie_set"] for d in details], tried)
         picks = sweep.steadiest(points)
         before = sweep.row_turns(points, [d["tie_set"]["search_pick"] for d in details])
         after = sweep.row_turns(points, picks)

@@ -198,15 +198,18 @@ def slice_search(scorer: Scorer, start: np.ndarray, free: list) -> tuple[np.ndar
     best point, the evaluations)."""
     x, evaluations = np.asarray(start, dtype=float).copy(), 0
     grid = np.linspace(-1.0, 1.0, SLICE_POINTS)
+
+    def costs_along(axis: int, values: list) -> list[float]:
+        units = [np.where(np.arange(x.size) == axis, v, x) for v in values]
+        return [c for c, _ in scorer.score_many(units, scorer.search_draws, [scorer.fresh_seed(0)] * len(values))]
+
     for axis in free:
         values = list(grid)
-        costs = [c for c, _ in scorer.score_many([np.where(np.arange(x.size) == axis, v, x) for v in values],
-                                                 scorer.search_draws, [scorer.fresh_seed(0)] * len(values))]
+        costs = costs_along(axis, values)
         centre, step = values[int(np.argmin(costs))], grid[1] - grid[0]
         near = [float(np.clip(centre + f * step, -1.0, 1.0)) for f in SLICE_REFINE]
         near = [v for v in dict.fromkeys(near) if v not in values]
-        costs += [c for c, _ in scorer.score_many([np.where(np.arange(x.size) == axis, v, x) for v in near],
-                                                  scorer.search_draws, [scorer.fresh_seed(0)] * len(near))]
+        costs += costs_along(axis, near)
         values += near
         evaluations += len(values)
         x[axis] = values[int(np.argmin(costs))]

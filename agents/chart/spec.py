@@ -34,6 +34,7 @@ MAX_BUDGET = 100_000  # simulations per cell: days of work already; beyond it on
 MAX_WIDTHS = 2000  # every multiple of the finest tray (0.05 m) up to 100 m
 MAX_WIDTH_M = 100.0
 MAX_STEADY_TOLERANCE_PP = 100.0  # a tolerance this wide ties every point of any chart cell
+MANIFEST_DEFAULTS = {"steady_tolerance_pp": 0.0}  # spec fields a manifest leaves out at these values
 OBJECTIVES = ("robust", "nominal")  # robust: the search minimises the variability model's quantile
 METHODS = ("cmaes", "policy", "policy+search")
 
@@ -106,10 +107,11 @@ class ChartSpec:
         return (self.budget + REPAIR_PASSES * per_pass) * self.draws + 2 * self.verify_simulations
 
     def manifest(self) -> dict:
-        """The spec as the chart folder and chart.json record it; `steady_tolerance_pp` only when non-zero, so a
-        chart of the default rule has the manifest it had before the option (and resumes as it did)."""
+        """The spec as the chart folder and chart.json record it; a field of MANIFEST_DEFAULTS only away from
+        its default, so a chart of the default rule has the manifest it had before the option (and resumes as
+        it did)."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()
-                if k != "steady_tolerance_pp" or v != 0.0}
+                if k not in MANIFEST_DEFAULTS or v != MANIFEST_DEFAULTS[k]}
 
     def base_scene(self) -> Scene:
         return scene_from_dict(self.scene)

@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Optional
 
-from spreadgym.agents.chart.spec import Cell, ChartSpec
+from spreadgym.agents.chart.spec import MANIFEST_DEFAULTS, Cell, ChartSpec
 from spreadgym.agents.chart.sweep import points_of
 from spreadgym.config.base import brief
 from spreadgym.errors import SpreadgymError
@@ -70,9 +70,6 @@ def json_text(payload) -> str:
 def _plain(payload):
     """`payload` as it reads back from JSON (tuples become lists)."""
     return json.loads(json_text(payload))
-
-
-MANIFEST_DEFAULTS = {"steady_tolerance_pp": 0.0}  # a manifest leaves these out at their defaults
 
 
 def _changes(stored: dict, wanted: dict) -> list[str]:

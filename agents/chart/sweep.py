@@ -157,6 +157,11 @@ def points_of(tie: dict, candidates: Sequence[dict]) -> list[dict]:
     return list(tie["points"]) + [c for c in candidates if c["tied"]]
 
 
+def row_with(spaces: Sequence, tie_sets: Sequence[dict], candidates: Sequence[Sequence[dict]]) -> list[list[Point]]:
+    """The sweep's points of a row whose cells have `candidates` from the repair (`points_of` of each)."""
+    return row_points(spaces, [{**t, "points": points_of(t, c)} for t, c in zip(tie_sets, candidates)])
+
+
 def turning_axes(a: Point, b: Point, c: Point) -> list[int]:
     """The unit axes of the settings that turn over the targets' sizes at `b` (rpm, pitches)."""
     return [i for i, key in enumerate(b.values) if (key == "rpm" or key.endswith("pitch_deg"))
@@ -199,7 +204,7 @@ def repair(spaces: Sequence, widths: Sequence[float], tie_sets: Sequence[dict],
     settings). Cells whose tie set has no standard error (no re-score rounds) get no candidates."""
     tried: list[list[dict]] = [[] for _ in tie_sets]
     for pass_ in range(passes):
-        row = row_points(spaces, [{**t, "points": points_of(t, c)} for t, c in zip(tie_sets, tried)])
+        row = row_with(spaces, tie_sets, tried)
         picks = steadiest(row)
         now = row_turns(row, picks)
         jobs: dict[int, list] = {}
@@ -215,7 +220,7 @@ def repair(spaces: Sequence, widths: Sequence[float], tie_sets: Sequence[dict],
         for j in sorted(jobs):
             tried[j] += [{**point, "source": source, "pass": pass_}
                          for point, (_, source, _) in zip(found[j], jobs[j])]
-        row = row_points(spaces, [{**t, "points": points_of(t, c)} for t, c in zip(tie_sets, tried)])
+        row = row_with(spaces, tie_sets, tried)
         if row_turns(row, steadiest(row)) >= now:
             break
     return tried
