@@ -167,12 +167,12 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
     scores = rescore(scorer, kept, rounds)
     means = scores[:, :, 0].mean(axis=1)
     best = int(np.argmin(means))
-    best_se = float(scores[best, :, 0].std(ddof=1) / math.sqrt(rounds))
+    best_se = rounds_se(scores[best, :, 0])
     limit = tie_limit(float(means[best]), best_se, spec.steady_tolerance_pp)
     ties = [i for i in range(len(kept)) if means[i] <= limit]
     pick = best if neighbour is None else min(ties, key=lambda i: (float(np.linalg.norm(kept[i] - neighbour)),
                                                                    means[i]))
-    cv_se = [float(scores[i, :, 1].std(ddof=1) / math.sqrt(rounds)) for i in range(len(kept))]
+    cv_se = [rounds_se(scores[i, :, 1]) for i in range(len(kept))]
     points = [tie_point(kept[i], float(means[i]), float(scores[i, :, 1].mean()), cv_se[i]) for i in ties]
     return {"x": kept[pick], "cv": float(scores[pick, :, 1].mean()), "cv_se": cv_se[pick],
             "rounds": rounds, "ties": len(ties), "evaluations": result.evaluations + rounds * len(kept),
@@ -241,9 +241,14 @@ def score_candidates(spec: ChartSpec, cell: Cell, detail: dict, jobs: list) -> t
     out = []
     for unit, score, more in zip(units, scores, extra):
         mean = float(score[:, 0].mean())
-        point = tie_point(unit, mean, float(score[:, 1].mean()), float(score[:, 1].std(ddof=1) / math.sqrt(rounds)))
+        point = tie_point(unit, mean, float(score[:, 1].mean()), rounds_se(score[:, 1]))
         out.append({**point, "tied": mean <= limit, **more})
     return out, time.perf_counter() - started
+
+
+def rounds_se(values: np.ndarray) -> float:
+    """The standard error of the mean of one point's re-score rounds (`values`, one per round)."""
+    return float(values.std(ddof=1) / math.sqrt(values.size))
 
 
 def tie_limit(best: float, best_se: float, tolerance_pp: float = 0.0) -> float:
