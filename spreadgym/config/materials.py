@@ -16,7 +16,7 @@ from spreadgym.config.base import brief
 from spreadgym.config.resources import config_dir, read_yaml
 from spreadgym.errors import MaterialError
 
-PAIR_QUANTITIES = ("friction", "restitution", "impact_time_s")
+PAIR_QUANTITIES = ("friction", "restitution", "impact_time_s", "rolling_resistance")
 
 
 @dataclass(frozen=True)
@@ -43,6 +43,7 @@ class Fertilizer:
     friction: Mapping[str, Optional[float]]
     restitution: Mapping[str, Optional[float]]
     impact_time_s: Mapping[str, Optional[float]]
+    rolling_resistance: Mapping[str, Optional[float]]
     paper_stiffness_n_per_m: Mapping[str, float]
     paper_damping_ns_per_m: Mapping[str, float]
     size: SizeDistribution
@@ -93,6 +94,7 @@ def _fertilizer(name: str, raw: dict) -> Fertilizer:
         friction=dict(raw["friction"]),
         restitution=dict(raw["restitution"]),
         impact_time_s=dict(raw["impact_time_s"]),
+        rolling_resistance=dict(raw.get("rolling_resistance") or {k: 0.0 for k in raw["friction"]}),
         paper_stiffness_n_per_m=dict(raw.get("paper_stiffness_n_per_m", {})),
         paper_damping_ns_per_m=dict(raw.get("paper_damping_ns_per_m", {})),
         size=SizeDistribution(**raw["size"]),

@@ -136,6 +136,10 @@ class Contact(StrictModel):
     vane_restitution: Optional[Real] = Field(default=None, ge=0, le=1.0)
     disc_restitution: Optional[Real] = Field(default=None, ge=0, le=1.0)
     vane_contact_time_s: Optional[Real] = Field(default=None, gt=0, le=0.01)
+    rolling_resistance: Optional[Real] = Field(
+        default=None, ge=0, le=2.0,
+        description="vane rolling resistance mu_r: a torque mu_r r N against the granule's spin relative to the vane "
+                    "(0: loss-free rolling; >= the vane friction: sliding); docs/physics.md")
 
 
 class Deflector(StrictModel):

@@ -25,6 +25,7 @@ class Contacts:
     vane_friction: float
     vane_restitution: float
     vane_contact_time_s: Optional[float]  # only the spring-damper model needs it
+    vane_rolling_resistance: float  # mu_r: torque mu_r r N against the spin relative to the vane
     deflectors: tuple[PlateContact, ...]
 
 
@@ -55,5 +56,6 @@ def resolve_contacts(scene: Scene, library: MaterialLibrary) -> Contacts:
         vane_friction=_pick(c.vane_friction, fertilizer, "friction", vane),
         vane_restitution=_pick(c.vane_restitution, fertilizer, "restitution", vane),
         vane_contact_time_s=contact_time,
+        vane_rolling_resistance=_pick(c.rolling_resistance, fertilizer, "rolling_resistance", vane),
         deflectors=plates,
     )

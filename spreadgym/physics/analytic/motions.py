@@ -57,16 +57,29 @@ def slide_coefficients(omega_abs, mu_v, mu_d, w, slip_sign=1.0, motion_sign=1.0,
     return A, B, C
 
 
-def stick_coefficients(omega_abs, mu_d, motion_sign=1.0, kappa=SPHERE_INERTIA_FACTOR, g=GRAVITY_M_S2):
-    """(A, B, C) while the contact point does not slip (kappa=inf: locked, x'' = 0)."""
+def stick_coefficients(omega_abs, mu_d, motion_sign=1.0, kappa=SPHERE_INERTIA_FACTOR, g=GRAVITY_M_S2, mu_r=0.0,
+                       w=0.0):
+    """(A, B, C) while the contact point does not slip (kappa=inf: locked, x'' = 0).
+
+    Rolling with the vane's rolling resistance mu_r (a torque mu_r r N against the spin
+    relative to the vane, so against the rolling):
+        (1 + kappa) x'' = Omega^2 x - sgn(x') (mu_d g + mu_r N),   N = 2 Omega x' - Omega^2 w.
+    """
     om = np.asarray(omega_abs, dtype=float)
-    shape = np.broadcast(om, np.asarray(mu_d), np.asarray(motion_sign), np.asarray(kappa)).shape
+    shape = np.broadcast(om, np.asarray(mu_d), np.asarray(motion_sign), np.asarray(kappa), np.asarray(mu_r),
+                         np.asarray(w)).shape
     kappa = np.broadcast_to(np.asarray(kappa, dtype=float), shape)
     finite = np.isfinite(kappa)
     scale = np.where(finite, 1.0 / (1.0 + np.where(finite, kappa, 0.0)), 0.0)
     A = np.zeros(shape)
     B = np.broadcast_to(om * om * scale, shape).copy()
     C = np.broadcast_to(-motion_sign * np.asarray(mu_d, dtype=float) * g * scale, shape).copy()
+    mu_r = np.broadcast_to(np.asarray(mu_r, dtype=float), shape)
+    resisted = mu_r > 0.0  # only there: mu_r = 0 keeps the loss-free roller's coefficients to the bit
+    if np.any(resisted):
+        rolling = np.broadcast_to(motion_sign * mu_r * scale, shape)
+        A = np.where(resisted, -2.0 * rolling * om, A)
+        C = np.where(resisted, C + rolling * om * om * np.asarray(w, dtype=float), C)
     return A, B, C
 
 

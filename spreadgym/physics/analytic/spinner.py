@@ -102,7 +102,8 @@ def simulate_analytic(
         CatchState(catch.x_m, catch.speed_along_m_s, r, approach_speed0=catch.approach_m_s,
                    disc_contact_from_s=np.maximum(t_land - catch.time_s, 0.0),
                    time_limit_s=np.maximum(time_limit_s - catch.time_s, 0.0)),
-        FaceFriction(contacts.vane_friction, contacts.disc_friction, contacts.vane_restitution),
+        FaceFriction(contacts.vane_friction, contacts.disc_friction, contacts.vane_restitution,
+                     contacts.vane_rolling_resistance),
         VaneOptions(rotation=rotation, g=gravity_m_s2, impact_friction=impact_friction, flight_drag=flight_drag,
                     rebound_stop=rebound_stop),
     )

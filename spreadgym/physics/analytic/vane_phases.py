@@ -26,6 +26,7 @@ class _Granules:
 
     face: Face
     mu_v: np.ndarray
+    mu_r: np.ndarray  # rolling resistance at the vane
     mu_full: np.ndarray  # disc friction once on the disc
     r: np.ndarray
     tlim: np.ndarray
@@ -50,6 +51,7 @@ class _State:
     approach: np.ndarray  # speed towards the face at a pending impact
     sgn_m: np.ndarray  # sgn(x') of the current contact phase
     sgn_e: np.ndarray  # sgn(slip) while sliding
+    rho: np.ndarray  # sgn(Phi) the rolling resistance opposes while sliding; 0: held at Phi = 0
     stick: np.ndarray
     action: np.ndarray
     vn_fl: np.ndarray  # relative speed away from the face at the start of a flight (a rebound)
@@ -86,16 +88,18 @@ class PhaseMachine:
             *(np.asarray(a, dtype=float) for a in (
                 face.omega_abs, start.x0, start.v0, face.w, face.x_in, face.x_tip, face.disc_radius, friction.mu_v,
                 friction.mu_d, start.granule_radius, start.time_limit_s, start.disc_contact_from_s,
-                start.approach_speed0, friction.restitution))
+                start.approach_speed0, friction.restitution, friction.mu_r))
         )
         n = arrays[0].shape[0] if arrays[0].ndim else 1
-        Om, x, v, w, x_in, x_tip, R, mu_v, mu_full, r, tlim, t_on, approach, e_rest = (
+        Om, x, v, w, x_in, x_tip, R, mu_v, mu_full, r, tlim, t_on, approach, e_rest, mu_r = (
             np.array(np.atleast_1d(a), dtype=float) for a in arrays
         )
         approach = np.maximum(approach, 0.0)
         mu_d = np.where(t_on <= 0.0, mu_full, 0.0)
         self.options = options
         self.locked = options.rotation == "locked"
+        if self.locked:
+            mu_r = np.zeros_like(mu_r)  # a granule that does not turn feels no rolling resistance
         self.q = 1.0 if self.locked else options.kappa / (1.0 + options.kappa)  # |f| = q |G| while sticking
         Phi = (-r * Om if start.spin_offset0 is None
                else np.array(np.broadcast_to(start.spin_offset0, (n,)), dtype=float))
@@ -104,13 +108,14 @@ class PhaseMachine:
         x_R = np.sqrt(np.maximum(R * R - w * w, 0.0))
         x_end = np.minimum(x_R, x_tip)
         self.c = _Granules(
-            face=Face(Om, w, x_in, x_tip, R), mu_v=mu_v, mu_full=mu_full, r=r, tlim=tlim, t_on=t_on, e_rest=e_rest,
+            face=Face(Om, w, x_in, x_tip, R), mu_v=mu_v, mu_r=mu_r, mu_full=mu_full, r=r, tlim=tlim, t_on=t_on, e_rest=e_rest,
             x_R=x_R, x_end=x_end, tip_first=x_tip < x_R, t_eps=1e-10 / np.maximum(Om, 1e-300),
             # a rounding-level negative N is not a flight
             n_tol=1e-7 * Om * Om * (np.abs(x_end) + np.abs(w)),
         )
         self.s = _State(
             t=np.zeros(n), x=x, v=v, Phi=Phi, mu_d=mu_d, approach=approach, sgn_m=np.ones(n), sgn_e=np.ones(n),
+            rho=np.where(Phi != 0.0, np.sign(Phi), 1.0),
             stick=np.zeros(n, dtype=bool), action=np.where(approach > 0.0, _IMPACT, _CLASSIFY),
             vn_fl=np.zeros(n), n_fl=w.copy(), rebounding=np.zeros(n, dtype=bool),
         )
@@ -149,6 +154,15 @@ class PhaseMachine:
         s.n_fl[idx] = self.c.face.w[idx]
         s.rebounding[idx] = False
         s.action[idx] = _FLIGHT
+
+    def spin_resistance_sign(self, idx):
+        """rho of sliding granules `idx` (sgn_e set): sgn(Phi); at Phi = 0, 0 (held) where the
+        rolling resistance can hold the spin against the friction's torque (mu_r >= mu_v > ...
+        and mu_r > 0), else the way that torque turns it (-eps)."""
+        s, c = self.s, self.c
+        Phi, eps = s.Phi[idx], s.sgn_e[idx]
+        held = (c.mu_r[idx] > 0.0) & (c.mu_v[idx] <= c.mu_r[idx])
+        return np.where(Phi != 0.0, np.sign(Phi), np.where(held, 0.0, -eps))
 
     # --- the rounds ----------------------------------------------------------------------------
 
@@ -192,6 +206,8 @@ class PhaseMachine:
             v[idx] += f
             if not self.locked:
                 Phi[idx] += f / self.options.kappa
+                most = c.mu_r[idx] * (1.0 + e_i) * a_n / self.options.kappa
+                Phi[idx] = np.where(np.abs(Phi[idx]) <= most, 0.0, Phi[idx] - np.sign(Phi[idx]) * most)
         reb = e_i * a_n
         fly = reb > self.options.rebound_stop * Om[idx] * np.abs(x[idx])
         s.vn_fl[idx] = np.where(fly, reb, 0.0)
@@ -221,6 +237,7 @@ class PhaseMachine:
         slip = v[mv] + s.Phi[mv]
         s.stick[mv] = False
         s.sgn_e[mv] = np.where(slip != 0.0, np.sign(slip), 1.0)
+        s.rho[mv] = self.spin_resistance_sign(mv)
         s.action[mv] = np.where(slip != 0.0, _CONTACT, _STICKCHECK)
 
     def static_check(self, idx, _action):
@@ -242,20 +259,29 @@ class PhaseMachine:
         s.sgn_m[on] = 1.0
         s.stick[on] = False
         s.sgn_e[on] = np.where(Phi[on] != 0.0, np.sign(Phi[on]), 1.0)
+        s.rho[on] = self.spin_resistance_sign(on)
         s.action[on] = np.where(Phi[on] != 0.0, _CONTACT, _STICKCHECK)
 
     def stick_check(self, idx, _action):
-        """Slip has reached zero: stick if friction can hold it."""
+        """Slip has reached zero: stick if friction can hold it (with the rolling resistance:
+        |kappa G + sgn(x') mu_r N| / (1 + kappa) <= mu_v N)."""
         s, c = self.s, self.c
         Om = c.face.omega_abs
         Gv = Om[idx] ** 2 * s.x[idx] - s.sgn_m[idx] * s.mu_d[idx] * self.options.g
         N = normal_force(Om[idx], s.v[idx], c.face.w[idx])
-        ok = self.q * np.abs(Gv) <= c.mu_v[idx] * N
+        ok = np.abs(self.q * Gv + self._rolling_term(idx, N)) <= c.mu_v[idx] * N
         s.stick[idx] = ok
         s.sgn_e[idx] = np.where(ok, s.sgn_e[idx], np.where(Gv >= 0.0, 1.0, -1.0))
         if not self.locked:
             s.Phi[idx] = -s.v[idx]
+        s.rho[idx] = self.spin_resistance_sign(idx)
         s.action[idx] = _CONTACT
+
+    def _rolling_term(self, idx, N):
+        """sgn(x') mu_r N / (1 + kappa): the rolling resistance's share of the vane friction while rolling."""
+        if self.locked:
+            return np.zeros_like(N)
+        return self.s.sgn_m[idx] * self.c.mu_r[idx] * N / (1.0 + self.options.kappa)
 
     def flight(self, idx, kind):
         """Flights off the face (closed form): to the rim, a re-catch or rest on the disc."""
@@ -322,7 +348,7 @@ class PhaseMachine:
         if self.locked:
             Ak, Bk, Ck = np.zeros_like(om), np.zeros_like(om), np.zeros_like(om)
         else:
-            Ak, Bk, Ck = stick_coefficients(om, md, sm, self.options.kappa, g)
+            Ak, Bk, Ck = stick_coefficients(om, md, sm, self.options.kappa, g, c.mu_r[idx], ww)
         A = np.where(st, Ak, As)
         B = np.where(st, Bk, Bs)
         C = np.where(st, Ck, Cs)
@@ -344,7 +370,7 @@ class PhaseMachine:
         sm, se, st = s.sgn_m[idx], s.sgn_e[idx], s.stick[idx]
         mv, md = c.mu_v[idx], s.mu_d[idx]
         mot, T, tmin, t_rem, N0 = phase.mot, phase.T, phase.tmin, phase.t_rem, phase.N0
-        cand = np.full((idx.size, 9), np.inf)
+        cand = np.full((idx.size, 10), np.inf)
 
         def put(col, ev, sel):
             sel = np.nonzero(sel)[0]
@@ -365,28 +391,43 @@ class PhaseMachine:
             ev = mot.event(-se * slip0, 0.0, 0.0, -se)
         else:
             slip0 = vv + s.Phi[idx]
-            # slip(t) = slip0 + dv - (2 Omega eps mu / kappa) dx + (eps mu Omega^2 w / kappa) t
-            ev = mot.event(-se * slip0, -mv * om * om * ww / kappa, 2.0 * om * mv / kappa, -se)
-        put(4, ev, ~st)
-        # 5, 6: friction limit while sticking: +-q G - mu N = 0
+            # slip(t) = slip0 + dv - k (2 Omega dx - Omega^2 w t), k = (eps mu_v + rho mu_r) / kappa
+            ek = se * self._phi_rate(idx)
+            ev = mot.event(-se * slip0, -ek * om * om * ww, 2.0 * om * ek, -se)
+        held = (s.rho[idx] == 0.0) & (c.mu_r[idx] > 0.0)  # slip = x': its zero is the x' = 0 event (2)
+        put(4, ev, ~st & ~held)
+        # 5, 6: friction limit while sticking: +-(q G + sgn(x') mu_r N / (1 + kappa)) - mu_v N = 0
         G0 = om * om * xx - sm * md * g
+        roll = self._rolling_term(idx, 1.0)
         for col, sign in ((5, 1.0), (6, -1.0)):
-            put(col, mot.event(sign * q * G0 - mv * N0, 0.0, sign * q * om * om, -2.0 * om * mv), st)
+            put(col, mot.event(sign * (q * G0 + roll * N0) - mv * N0, 0.0, sign * q * om * om,
+                               2.0 * om * (sign * roll - mv)), st)
         cand[:, 7] = np.where(T >= t_rem, t_rem, np.inf)  # time limit
         # 8: the granule lands on the disc (disc friction starts)
         to_land = c.t_on[idx] - s.t[idx]
         cand[:, 8] = np.where((to_land > 0.0) & (to_land <= T), to_land, np.inf)
+        # 9: Phi reaches 0 while sliding against the rolling resistance: -rho Phi(t) = 0
+        turning = ~st & (s.rho[idx] != 0.0) & (c.mu_r[idx] > 0.0)
+        if not self.locked and np.any(turning):
+            rk = s.rho[idx] * self._phi_rate(idx)
+            put(9, mot.event(-s.rho[idx] * s.Phi[idx], -rk * om * om * ww, 2.0 * om * rk, 0.0), turning)
         which = np.argmin(cand, axis=1)
         tau = cand[np.arange(idx.size), which]
         none = ~np.isfinite(tau)
         # No event before the horizon (should not happen): stop at the horizon, time out.
         return np.where(none, T, tau), np.where(none, 7, which)
 
+    def _phi_rate(self, idx):
+        """k of a sliding phase, Phi' = -k N: (eps mu_v + rho mu_r) / kappa (0 while held)."""
+        s, c = self.s, self.c
+        rate = (s.sgn_e[idx] * c.mu_v[idx] + s.rho[idx] * c.mu_r[idx]) / self.options.kappa
+        return np.where((s.rho[idx] == 0.0) & (c.mu_r[idx] > 0.0), 0.0, rate)
+
     def _advance(self, idx, phase: "_Phase", tau):
         """Move `idx` along its phase by tau; track the smallest normal force met."""
         s, c, out = self.s, self.c, self.out
         om, xx, vv, ww = c.face.omega_abs[idx], s.x[idx], s.v[idx], c.face.w[idx]
-        se, st, mv = s.sgn_e[idx], s.stick[idx], c.mu_v[idx]
+        st = s.stick[idx]
         mot = phase.mot
         dx = mot.dx(tau)
         dv = mot.dv(tau)
@@ -395,7 +436,7 @@ class PhaseMachine:
         if self.locked:
             Phi_new = s.Phi[idx]
         else:
-            Phi_sl = s.Phi[idx] - (se * mv / self.options.kappa) * (2.0 * om * dx - om * om * ww * tau)
+            Phi_sl = s.Phi[idx] - self._phi_rate(idx) * (2.0 * om * dx - om * om * ww * tau)
             Phi_new = np.where(st, -v_new, Phi_sl)
         # smallest normal force met in this phase (N is a sum of two exponentials: check ends + extremum)
         Nend = normal_force(om, v_new, ww)
@@ -440,9 +481,14 @@ class PhaseMachine:
         out.breaks[i] += 1
         s.stick[i] = False
         s.sgn_e[i] = np.where(Gi >= 0.0, 1.0, -1.0)
+        s.rho[i] = self.spin_resistance_sign(i)
         action[i] = _CONTACT
         i = idx[e == 7]
         self.finish(i, RETAINED_TIMEOUT)
+        i = idx[e == 9]  # Phi = 0 while sliding: held there, or turned on through 0
+        s.Phi[i] = 0.0
+        s.rho[i] = self.spin_resistance_sign(i)
+        action[i] = _CONTACT
         i = idx[e == 8]  # landed: same motion, now with disc friction; re-check a no-slip phase
         s.t[i] = c.t_on[i]
         action[i] = np.where(s.stick[i], _STICKCHECK, _CONTACT)

@@ -31,15 +31,27 @@ Phi = -r Omega is a granule that does not turn in the machine frame (the frame's
 rotation enters the no-slip condition here). A "locked" granule keeps that value
 (kappa -> infinity); a "free" granule starts with it (no spin at the catch).
 
+Rolling resistance (type A of Ai et al. 2011): the vane resists the granule's spin
+relative to it with a torque of magnitude mu_r r N, directed against phi' (so against
+Phi), which holds phi' = 0 when it can:  Phi' = (f - rho mu_r N) / kappa, rho = sgn(Phi).
+
 Phases (each a linear ODE with constant coefficients, so each has a closed form):
   * slide:  f = -eps mu_v N, eps = sgn(slip):
         x'' + 2 eps mu_v Omega x' - Omega^2 x = -sgn(x') mu_d g + eps mu_v Omega^2 w
     roots Omega(-eps mu_v +- sqrt(1 + mu_v^2)); for eps = sgn(x') = +1 this is the
-    classic sliding equation.  Phi(t) = Phi0 - (eps mu_v / kappa)(2 Omega (x - x0) - Omega^2 w t).
+    classic sliding equation.
+        Phi(t) = Phi0 - ((eps mu_v + rho mu_r) / kappa)(2 Omega (x - x0) - Omega^2 w t),
+    until Phi reaches 0: there the resistance holds it ("held", rho = 0, Phi stays 0: the
+    granule turns with the vane) if mu_r >= mu_v, else the friction turns it on through 0
+    (rho = -eps). With mu_r >= mu_v a sliding granule therefore ends as the classic
+    sliding point mass (slip = x'): the sliding limit.
   * stick (no slip at the vane; "rolling" for a free sphere):
-        x'' (1 + kappa) = Omega^2 x - sgn(x') mu_d g,    f = -kappa/(1+kappa) G,
-    with G = Omega^2 x - sgn(x') mu_d g; it holds while |f| <= mu_v N. For a locked
-    granule (kappa -> inf) sticking means x' = r Omega held by static friction f = -G.
+        x'' (1 + kappa) = Omega^2 x - sgn(x') (mu_d g + mu_r N),
+        f = -(kappa G + sgn(x') mu_r N) / (1 + kappa),
+    with G = Omega^2 x - sgn(x') mu_d g; it holds while |f| <= mu_v N. With mu_r = 0 this
+    is the loss-free roller (the departure then does not depend on mu_v once mu_v is
+    large enough to hold the roll). For a locked granule (kappa -> inf) sticking means
+    x' = r Omega held by static friction f = -G, and mu_r does nothing (no rotation).
   * flight: N would be negative, or the granule rebounds from an impact, so it is off
     the face. It then moves in a straight line in the machine frame, plus the disc's
     drag to first order if asked (flight_drag; closed form along the line: `vane_flight`),
@@ -51,7 +63,8 @@ Impacts (the catch when CatchState.approach_speed0 > 0, every re-catch): the rel
 velocity -a (towards the face) becomes e a (restitution e); with impact_friction a
 tangential impulse of at most mu_v (1 + e) a (per unit mass) acts against the slip of
 the contact point and stops it at most (slip changes by the impulse times 1 + 1/kappa,
-times 1 when locked), Phi changes by impulse / kappa. A rebound e a above
+times 1 when locked), Phi changes by impulse / kappa; then the rolling resistance's
+angular impulse takes at most mu_r (1 + e) a / kappa off |Phi| (never reversing it). A rebound e a above
 rebound_stop Omega x starts a flight; a slower one ends the bouncing: plastic. The
 rebounds fall by about e per impact, so that takes log(rebound_stop) / log(e) impacts
 (8 for e = 0.43 and the default 1e-3). With e = 0 and no impact friction (the
@@ -124,11 +137,13 @@ class CatchState:
 
 @dataclass(frozen=True)
 class FaceFriction:
-    """Vane friction mu_v, disc friction mu_d and the restitution e of impacts on the face."""
+    """Vane friction mu_v, disc friction mu_d, the restitution e of impacts on the face and
+    the vane's rolling resistance mu_r (a torque mu_r r N against the spin relative to the vane)."""
 
     mu_v: object
     mu_d: object
     restitution: object = 0.0
+    mu_r: object = 0.0
 
 
 @dataclass(frozen=True)

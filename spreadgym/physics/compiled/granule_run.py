@@ -40,6 +40,7 @@ from spreadgym.physics.compiled.layout import (
     INV_KAPPA,
     LENGTH,
     MU_DISC,
+    MU_ROLL,
     MU_VANE,
     NX,
     NY,
@@ -66,11 +67,24 @@ OUT_SIZE = 10
 
 
 @INLINED
+def _resist_spin(s, omega, normal_impulse, radius, P):
+    """The spin after the vane's rolling resistance acts through a normal impulse (per unit
+    mass): an angular impulse of at most mu_r r J_n against s - omega, which it never reverses."""
+    if P[MU_ROLL] <= 0.0:
+        return s
+    most = P[MU_ROLL] * normal_impulse * P[INV_KAPPA] / radius
+    w = s - omega
+    if abs(w) <= most:
+        return omega
+    return s - math.copysign(most, w)
+
+
+@INLINED
 def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
     """Impact on a surface of normal n; (vx, vy, s, stays in contact). A rebound whose
     flight back (2 e a / press) would be shorter than P[REBOUND_FLIGHT] ends the
     bouncing: that impact is plastic, and the granule stays on a face the frame presses
-    it on."""
+    it on. The rolling resistance acts through the impact's normal impulse after its friction."""
     omega = P[OMEGA]
     bx, by, bs, approach = impact(vx, vy, s, nx, ny, radius, omega, P[E_VANE], P[MU_VANE], P[INV_KAPPA])
     if approach <= 0.0:
@@ -79,26 +93,46 @@ def _catch(cx, cy, vx, vy, s, nx, ny, radius, P):
     ax, ay = frame_acceleration(cx, cy, px, py, omega)
     press = -(ax * nx + ay * ny)
     if press > 0.0 and 2.0 * P[E_VANE] * approach < press * P[REBOUND_FLIGHT]:
-        return px, py, ps, True
-    return bx, by, bs, False
+        return px, py, _resist_spin(ps, omega, approach, radius, P), True
+    return bx, by, _resist_spin(bs, omega, (1.0 + P[E_VANE]) * approach, radius, P), False
 
 
 @INLINED
 def _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, slip_is_zero):
-    """(sticking, eps, x') for a granule on a face: it rolls (no slip) if it does not slip
-    and friction can hold that; otherwise it slides against its slip. `slip_is_zero`:
+    """(sticking, eps, rho, x') for a granule on a face: it rolls (no slip) if it does not
+    slip and friction can hold that; otherwise it slides against its slip. `slip_is_zero`:
     the slip has just reached 0; its remainder (the error of the located event) is
-    taken off x' so the new phase starts exactly at zero slip."""
+    taken off x' so the new phase starts exactly at zero slip. rho: the sign of the spin
+    relative to the vane that the rolling resistance opposes (`_sliding_spin_sign`)."""
     omega = P[OMEGA]
+    q = frame[6]
     sl = face_motion.slip(xd, s, frame, radius, omega)
     tol = 1e-9 * (abs(xd) + radius * abs(omega))
     if not slip_is_zero and abs(sl) > tol:
-        return False, math.copysign(1.0, sl), xd
+        eps = math.copysign(1.0, sl)
+        return False, eps, _sliding_spin_sign(s, omega, q, eps, P), xd
     xd -= sl
-    _, _, normal, f, _ = face_motion.forces(x, xd, s, True, 1.0, drag_sign, frame, radius, P)
+    # rolling: w = x' / (q r), or from rest the way the face's force drives it
+    drive = xd
+    if drive == 0.0:
+        _, _, _, _, drive = face_motion.forces(x, xd, s, True, 1.0, 0.0, drag_sign, frame, radius, P)
+    roll = q * math.copysign(1.0, drive)
+    _, _, normal, f, _ = face_motion.forces(x, xd, s, True, 1.0, roll, drag_sign, frame, radius, P)
     if abs(f) <= P[MU_VANE] * max(normal, 0.0):
-        return True, 1.0, xd
-    return False, -math.copysign(1.0, f), xd
+        return True, 1.0, roll, xd
+    eps = -math.copysign(1.0, f)
+    return False, eps, _sliding_spin_sign(s, omega, q, eps, P), xd
+
+
+@INLINED
+def _sliding_spin_sign(s, omega, q, eps, P):
+    """rho of a sliding granule: sgn(s - omega); at s = omega, 0 (held) if the rolling
+    resistance can hold the spin against the friction's torque (mu_r >= mu_v), else the
+    way that torque turns it (q eps)."""
+    w = s - omega
+    if w != 0.0 or P[MU_ROLL] <= 0.0:
+        return math.copysign(1.0, w) if w != 0.0 else q * eps
+    return 0.0 if P[MU_VANE] <= P[MU_ROLL] else q * eps
 
 
 @INLINED
@@ -126,7 +160,7 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
         z, vz = 0.0, 0.0
     below = z < top
     t = 0.0
-    on_face, entering, vane, side, sticking, eps = False, False, -1, 0.0, False, 1.0
+    on_face, entering, vane, side, sticking, eps, rho = False, False, -1, 0.0, False, 1.0, 1.0
     frame = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     x, xd, length = 0.0, 0.0, 0.0
     outcome = RETAINED_TIMEOUT
@@ -190,8 +224,8 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
             xd = vx * frame[2] + vy * frame[3]
             cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
             vx, vy = xd * frame[2], xd * frame[3]
-            sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius, P,
-                                                False)
+            sticking, eps, rho, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame,
+                                                         radius, P, False)
         if loop < n_track:
             track[loop, 0], track[loop, 1], track[loop, 2] = cx, cy, t
         if t >= P[TIME_LIMIT]:
@@ -200,7 +234,7 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
         full = True
         if on_face:
             drag_sign = _drag_sign(x, xd, frame, resting, P)
-            x, xd, s, used, event = face_motion.step(x, xd, s, h, sticking, eps, drag_sign, frame, radius,
+            x, xd, s, used, event = face_motion.step(x, xd, s, h, sticking, eps, rho, drag_sign, frame, radius,
                                                      length, P, work)
             cx, cy = frame[0] + x * frame[2], frame[1] + x * frame[3]
             vx, vy = xd * frame[2], xd * frame[3]
@@ -210,19 +244,25 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
             elif event == face_motion.LEAVE_NORMAL or event == face_motion.END_OF_FACE:
                 on_face = False
             elif event == face_motion.SLIP_CHANGE:
-                if sticking:
-                    _, _, _, f, _ = face_motion.forces(x, xd, s, True, 1.0, drag_sign, frame, radius, P)
+                if sticking:  # the friction limit: it slides on, its spin still turning the same way
+                    _, _, _, f, _ = face_motion.forces(x, xd, s, True, 1.0, rho, drag_sign, frame, radius, P)
                     sticking, eps = False, -math.copysign(1.0, f)
                 else:
-                    sticking, eps, xd = _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, True)
+                    sticking, eps, rho, xd = _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, True)
+            elif event == face_motion.SPIN_STOP:
+                s = omega  # the spin relative to the vane reached 0 (rolling: so did x')
+                if sticking:
+                    sticking, eps, rho, xd = _rolling_or_sliding(x, xd, s, drag_sign, frame, radius, P, True)
+                else:
+                    rho = _sliding_spin_sign(s, omega, frame[6], eps, P)
             elif event == face_motion.STOPPED:
                 xd, vx, vy = 0.0, 0.0, 0.0
                 pull = omega * omega * (cx * frame[2] + cy * frame[3])
                 if abs(pull) <= P[MU_DISC] * g:
                     outcome = RETAINED_STUCK
                 else:
-                    sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P),
-                                                        frame, radius, P, False)
+                    sticking, eps, rho, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P),
+                                                                 frame, radius, P, False)
         else:
             drag = P[MU_DISC] * g if resting else 0.0
             cx, cy, vx, vy, used, event, k, sd = free_motion.step(cx, cy, vx, vy, h, below, drag, reach, P, V)
@@ -262,8 +302,8 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
             if on_face:
                 xd = math.copysign(max(abs(xd) - P[MU_DISC] * j, 0.0), xd)
                 vx, vy = xd * frame[2], xd * frame[3]
-                sticking, eps, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame, radius,
-                                                    P, False)
+                sticking, eps, rho, xd = _rolling_or_sliding(x, xd, s, _drag_sign(x, xd, frame, resting, P), frame,
+                                                             radius, P, False)
             else:
                 vx, vy = disc_drag_impulse(vx, vy, P[MU_DISC] * j)
         elif full and vertical == vertical_events.VANE_TOP_CROSSING:

@@ -33,7 +33,8 @@ INV_KAPPA = 12  # m r^2 / I of a granule: 1/0.4 for a free sphere, 0 for locked 
 STUCK_SPEED = 13  # m/s: slower than this (and held by static friction) counts as stuck
 REBOUND_FLIGHT = 14  # s: a rebound off a vane whose flight would be shorter ends the bouncing
 OVERLAP_RATE = 15  # 1/s: the full model's overlap correction, (1 - bias**dt) / dt of its pymunk spaces
-P_SIZE = 16
+MU_ROLL = 16  # rolling resistance at the vanes: torque mu_r r N against the spin relative to the vane
+P_SIZE = 17
 
 # Columns of V (one row per vane): inner end p, unit vector u along the vane,
 # leading-face normal n (towards the direction of rotation), length of the centre line.
@@ -60,6 +61,7 @@ def pack_parameters(scene: Scene, contacts: Contacts, resolved_s: float, time_li
     p[VANE_TOP] = scene.vanes.height_m
     p[MU_DISC], p[E_DISC] = contacts.disc_friction, contacts.disc_restitution
     p[MU_VANE], p[E_VANE] = contacts.vane_friction, contacts.vane_restitution
+    p[MU_ROLL] = contacts.vane_rolling_resistance
     p[GRAVITY] = GRAVITY_M_S2
     p[STEP] = OMEGA_STEP / abs(omega)
     p[SETTLE_SPEED] = 0.5 * GRAVITY_M_S2 * resolved_s

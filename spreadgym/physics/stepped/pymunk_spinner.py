@@ -9,6 +9,12 @@ touch each other (one shape group). The height above the disc (drop, bounces) is
 1-D model of `vertical.py`; the disc's Coulomb drag is applied as a body force through
 `pymunk.batch`, limited so it never reverses the relative velocity within a step.
 
+The vane's rolling resistance (`contacts.vane_rolling_resistance`, mu_r) is a torque
+against each granule's spin relative to the vane, s - omega: over a step, an angular
+impulse of mu_r r J_n (J_n the normal impulse the vanes gave it in the step before),
+at most what stops that relative spin (it never reverses it, as the disc friction).
+It is written as a torque before the step, so the solver's friction sees it.
+
 Granules are spread over several small independent spaces (interleaved by release
 phase): Chipmunk's broad phase then stays cheap although all granules start on one
 ring, and the numpy work is still done once per step for all of them.
@@ -50,6 +56,12 @@ _GRANULE, _VANE = 0b01, 0b10
 _BELOW_VANE_TOPS = pymunk.ShapeFilter(group=1, categories=_GRANULE, mask=_VANE)
 _ABOVE_VANE_TOPS = pymunk.ShapeFilter(group=1, categories=_GRANULE, mask=0)
 
+_CONTACTS = (
+    batch.ArbiterFields.BODY_A_ID
+    | batch.ArbiterFields.BODY_B_ID
+    | batch.ArbiterFields.TOTAL_IMPULSE
+    | batch.ArbiterFields.NORMAL
+)
 _STATE = (
     batch.BodyFields.BODY_ID
     | batch.BodyFields.POSITION
@@ -91,6 +103,7 @@ class _SpinnerSpace:
         self.space = space
         self.buffer = batch.Buffer()
         self._write_buffer = batch.Buffer()
+        self._contact_buffer = batch.Buffer()
         # Body ids (sorted) and their granule indices; the spinner maps to -1.
         ids = np.array([spinner.id] + list(self.shapes), dtype=np.uintp)
         order = np.argsort(ids)
@@ -106,10 +119,22 @@ class _SpinnerSpace:
         return rows, np.frombuffer(self.buffer.float_buf(), dtype=np.float64).reshape(-1, 5)
 
     def write_forces(self, forces: np.ndarray) -> None:
-        """Set the force of every row (rows in the order of the last read)."""
+        """Set the force (rows of fx, fy) or the force and torque (fx, fy, torque) of every
+        row (rows in the order of the last read)."""
+        fields = batch.BodyFields.FORCE | batch.BodyFields.TORQUE if forces.shape[1] == 3 else batch.BodyFields.FORCE
         self._forces = np.ascontiguousarray(forces, dtype=np.float64).ravel()
         self._write_buffer.set_float_buf(self._forces)
-        batch.set_space_bodies(self.space, batch.BodyFields.FORCE, self._write_buffer)
+        batch.set_space_bodies(self.space, fields, self._write_buffer)
+
+    def vane_impulses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Granule indices and the normal impulse (N s) of each of their vane contacts in the last step."""
+        self._contact_buffer.clear()
+        batch.get_space_arbiters(self.space, _CONTACTS, self._contact_buffer)
+        ids = np.frombuffer(self._contact_buffer.int_buf(), dtype=np.uintp).reshape(-1, 2)
+        data = np.frombuffer(self._contact_buffer.float_buf(), dtype=np.float64).reshape(-1, 4)
+        ends = self._index[np.searchsorted(self._sorted_ids, ids)]
+        granule = np.max(ends, axis=1)  # the other end is the spinner (-1)
+        return granule, np.abs(data[:, 0] * data[:, 2] + data[:, 1] * data[:, 3])
 
     @property
     def empty(self) -> bool:
@@ -126,6 +151,18 @@ class _SpinnerSpace:
             objects.extend(self.shapes.pop(int(body_id)))
         if objects:
             self.space.remove(*objects)
+
+
+def _resisting_torque(spaces, rolling_resistance, n, radius_m, moment, relative_spin, dt):
+    """Torque (N m, (n,)) of the vanes' rolling resistance over the next step: an angular
+    impulse of mu_r r J_n (J_n: the vane normal impulse of the last step) against the spin
+    relative to the vane, at most the impulse that stops it."""
+    impulse = np.zeros(n)
+    for space in spaces:
+        granule, normal = space.vane_impulses()
+        impulse += np.bincount(granule, normal, minlength=n)
+    angular = np.minimum(rolling_resistance * radius_m * impulse, moment * np.abs(relative_spin))
+    return -np.sign(relative_spin) * angular / dt
 
 
 def simulate_pymunk(
@@ -162,6 +199,8 @@ def simulate_pymunk(
     record = DepartureRecord(first)
     active = np.ones(n, dtype=bool)
     stuck_accel = contacts.disc_friction * GRAVITY_M_S2
+    rolling_resistance = 0.0 if scene.granule.rotation == "locked" else contacts.vane_rolling_resistance
+    moment = SPHERE_INERTIA_FACTOR * granules.mass_kg * granules.radius_m**2
 
     steps = int(math.ceil(MAX_SPINNER_TIME_S / dt))
     tracked = np.arange(min(track_count, n))
@@ -200,8 +239,11 @@ def simulate_pymunk(
         dv = friction_velocity_change(
             new_pos, new_vel, omega, contacts.disc_friction, normal_impulse[idx], disc_friction_guard
         )
-        forces = np.zeros((rows.size, 2))
-        forces[granule_rows] = dv * (granules.mass_kg[idx] / dt)[:, None]
+        forces = np.zeros((rows.size, 3 if rolling_resistance > 0.0 else 2))
+        forces[granule_rows, :2] = dv * (granules.mass_kg[idx] / dt)[:, None]
+        if rolling_resistance > 0.0:
+            forces[granule_rows, 2] = _resisting_torque(spaces, rolling_resistance, n, granules.radius_m, moment,
+                                                        spin - omega, dt)[idx]
         now_below = vertical.z < vane_top
         offset = 0
         for space, (space_rows, _) in zip(spaces, reads):
