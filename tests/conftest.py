@@ -17,7 +17,7 @@ def prepare(library):
     """(granules, contacts) for a scene, sampled with the scene's seed."""
 
     def _prepare(scene):
-        granules = sample_granules(scene, library.fertilizer(scene.fertilizer))
+        granules = sample_granules(scene, library.fertilizer_of(scene))
         return granules, resolve_contacts(scene, library)
 
     return _prepare

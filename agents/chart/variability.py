@@ -123,7 +123,7 @@ def draw_library(library: MaterialLibrary, fertilizer: str, cell_draws: list[Dra
 def perturbed(scene: Scene, settings: dict, draw: Draw, library: MaterialLibrary) -> dict:
     """Scene overrides of `settings` (the settings space's overrides) under `draw`, its granule seed included."""
     contacts = resolve_contacts(scene, library)
-    fertilizer = library.fertilizer(scene.fertilizer)
+    fertilizer = library.fertilizer_of(scene)
     d50 = scene.granule.diameter_m if scene.granule.diameter_m is not None else fertilizer.size.d50_m
     f = draw.factors
     out = dict(settings)
@@ -133,7 +133,7 @@ def perturbed(scene: Scene, settings: dict, draw: Draw, library: MaterialLibrary
         pitch = np.clip(np.asarray(settings["vanes.pitch_deg"], dtype=float) + offset, -MAX_PITCH_DEG, MAX_PITCH_DEG)
         out["vanes.pitch_deg"] = pitch.tolist()
     out.update({
-        "fertilizer": draw_name(scene.fertilizer, draw),
+        "fertilizer": draw_name(scene.fertilizer_name, draw),
         "contact.disc_friction": min(2.0, contacts.disc_friction * f["disc_friction"]),
         "contact.vane_friction": min(2.0, contacts.vane_friction * f["vane_friction"]),
         "contact.disc_restitution": min(1.0, contacts.disc_restitution * f["restitution"]),

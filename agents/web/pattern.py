@@ -155,7 +155,7 @@ def scene_info(scene: Scene) -> dict:
     """What the page needs to lay out a scene's controls."""
     from spreadgym.config.materials import load_library
 
-    return {"name": scene.name, "description": scene.description, "fertilizer": scene.fertilizer,
+    return {"name": scene.name, "description": scene.description, "fertilizer": scene.fertilizer_name,
             "fertilizers": sorted(load_library().fertilizers), "controls": controls(scene),
             "tray_width_m": scene.pattern.tray_width_m}
 

@@ -192,7 +192,7 @@ class Task:
     def fallbacks(self, scene: Scene) -> dict[str, float]:
         """Dotted scene keys of the restitutions the library lacks and the scene leaves unset."""
         fallback = self.cfg.fallback_restitution
-        measured = self.library.fertilizer(scene.fertilizer).restitution
+        measured = self.library.fertilizer_of(scene).restitution
         extra: dict[str, float] = {}
         if scene.contact.disc_restitution is None and measured.get(scene.spinner.material) is None:
             extra["contact.disc_restitution"] = fallback.disc

@@ -62,3 +62,23 @@ def output_folder(text: str) -> Path:
 SEED = integer(0, 2**32 - 1)
 COUNT = integer(1)
 GRANULES = integer(1, 1_000_000)
+
+
+def materials_file(text: str) -> Path:
+    """`--materials FILE`: a user's materials file (the library's layout), read and checked
+    here so a bad one is one line before any work starts."""
+    from spreadgym.config.materials import load_library
+    from spreadgym.errors import SpreadgymError
+
+    try:
+        load_library(extra=Path(text))
+    except SpreadgymError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--materials: ")) from None
+    return Path(text)
+
+
+def add_materials_flag(parser: argparse.ArgumentParser) -> None:
+    """The `--materials FILE` flag of every command that reads a scene."""
+    parser.add_argument("--materials", type=materials_file, metavar="FILE",
+                        help="your materials file (configs/materials.yaml's layout) merged over the library: its "
+                             "fertilizers can be named in the scene or with --set fertilizer=NAME")

@@ -32,6 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sim.seed of every evaluation and the start design's seed (default: the scene's)")
     parser.add_argument("--threads", type=arguments.COUNT, default=None, metavar="N",
                         help="threads for the simulations (default: the cores this process may use)")
+    arguments.add_materials_flag(parser)
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--out", type=arguments.output_folder, metavar="DIR",
                         help="write the fitted scene, estimates, pattern, CV curve and picture into DIR")
@@ -48,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.threads is not None:
         set_threads(args.threads)
-    scene = load_scene(args.scene, parse_assignments(args.overrides))
+    scene = load_scene(args.scene, parse_assignments(args.overrides), args.materials)
     seed = scene.sim.seed if args.seed is None else args.seed
     scene = scene_with(scene, {"sim.seed": seed})
     space = parse_fit_specs(args.fit, scene)

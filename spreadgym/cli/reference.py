@@ -35,6 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"exactly K independent runs pooled instead (at least {MIN_RUNS}; ignores --precision)")
     parser.add_argument("--threads", type=arguments.integer(1, 4096), metavar="N",
                         help="threads to use (default: SPREADGYM_THREADS, else every core this process may use)")
+    arguments.add_materials_flag(parser)
     parser.add_argument("--json", action="store_true", help="print the reference as JSON")
 
 
@@ -49,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
             raise SpreadgymError(f"--granules: {args.granules} must be at least 1")
         overrides["sim.granules"] = args.granules
     try:
-        scene = load_scene(args.scene, overrides)
+        scene = load_scene(args.scene, overrides, args.materials)
     except ConfigError as exc:  # the flag that set the key, where one did
         if args.granules is not None and exc.key == "sim.granules":
             raise SpreadgymError(f"--granules: {exc.message}") from None

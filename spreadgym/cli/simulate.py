@@ -44,6 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="N", help=f"at most N runs of sim.granules each (default {SIMULATE_MAX_RUNS})")
     parser.add_argument("--threads", type=arguments.integer(1, 4096), metavar="N",
                         help="threads to use (default: SPREADGYM_THREADS, else every core this process may use)")
+    arguments.add_materials_flag(parser)
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
     parser.add_argument("--plot", type=arguments.output_folder, metavar="DIR", help="write PNG pictures into DIR")
 
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.threads is not None:
         set_threads(args.threads)
-    scene = load_scene(args.scene, parse_assignments(args.overrides))
+    scene = load_scene(args.scene, parse_assignments(args.overrides), args.materials)
     with tqdm(desc="runs", unit="run", file=sys.stderr, disable=None, leave=False) as bar:
         precise = simulate_precisely(scene, args.precision, args.max_runs, model=args.model,
                                      tracks=30 if args.plot else 0, progress=lambda done, _cap: bar.update(1))

@@ -8,14 +8,16 @@ Validation errors name the dotted key, the bad value and the allowed range.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Annotated, Any, Literal, Mapping, Optional, TypeVar, Union
 
-from pydantic import Field, Strict, ValidationError, model_validator
+from pydantic import Field, Strict, ValidationError, field_validator, model_validator
 
-from spreadgym.config.base import Integer, Real, StrictModel, format_validation_error, validate
+from spreadgym.config.base import Integer, Real, StrictModel, brief, format_validation_error, validate
+from spreadgym.config.materials import FertilizerSpec, fertilizer_name, load_library
 from spreadgym.config.overrides import set_in_place
 from spreadgym.config.resources import read_yaml, resolve_named
-from spreadgym.errors import ConfigError
+from spreadgym.errors import ConfigError, MaterialError
 
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 MAX_RPM = 5000.0
@@ -275,7 +277,9 @@ class Twin(StrictModel):
 class Scene(StrictModel):
     name: str
     description: str = ""
-    fertilizer: str
+    fertilizer: Union[str, FertilizerSpec] = Field(
+        description="a name from the material library (or a --materials file), or the fertilizer itself as a "
+                    "mapping (density, size, friction, restitution, rolling_resistance per surface; docs/materials.md)")
     spinner: Spinner
     vanes: Vanes
     feed: Feed
@@ -287,6 +291,23 @@ class Scene(StrictModel):
     flight: Flight = Flight()
     pattern: Pattern
     sim: Sim
+
+    @field_validator("fertilizer", mode="before")
+    @classmethod
+    def _fertilizer_named_or_given(cls, value: Any) -> Any:
+        """A name, or an inline fertilizer validated with the library's schema (its first
+        problem named by its key under `fertilizer.`)."""
+        if isinstance(value, FertilizerSpec):
+            return value
+        if isinstance(value, Mapping):
+            try:
+                return FertilizerSpec.model_validate(dict(value))
+            except ValidationError as exc:
+                problem = format_validation_error(exc, FertilizerSpec, "")
+                raise ValueError(f"{problem.key}: {problem.message}") from None
+        if not isinstance(value, str) or not value:
+            raise ValueError(f"a fertilizer name or a mapping of its properties, got {brief(value)}")
+        return value
 
     @model_validator(mode="after")
     def _work_bounded(self) -> "Scene":
@@ -319,6 +340,11 @@ class Scene(StrictModel):
                     raise ValueError(f"deflectors[{i}]: the plate reaches inside {where} (radius {radius} m); "
                                      f"plates must stay outside every disc")
         return self
+
+    @property
+    def fertilizer_name(self) -> str:
+        """The fertilizer's name for results and labels (an inline one's `name`, or "inline")."""
+        return fertilizer_name(self.fertilizer)
 
     @property
     def vane_outer_radius_m(self) -> float:
@@ -443,10 +469,19 @@ def load_scene_dict(name_or_path: str = "paper") -> dict:
     return raw
 
 
-def load_scene(name_or_path: str = "paper", overrides: Optional[Mapping[str, Any]] = None) -> Scene:
-    """Load, override (dotted keys) and validate a scene."""
+def load_scene(name_or_path: str = "paper", overrides: Optional[Mapping[str, Any]] = None,
+               materials: Optional[Path] = None) -> Scene:
+    """Load, override (dotted keys) and validate a scene. With a user's `materials` file, a
+    fertilizer it adds or changes is put inline into the scene (`fertilizer_value`)."""
     scene = scene_from_dict(load_scene_dict(name_or_path))
-    return scene_with(scene, overrides) if overrides else scene
+    scene = scene_with(scene, overrides) if overrides else scene
+    if materials is None or not isinstance(scene.fertilizer, str):
+        return scene
+    try:
+        value = load_library(extra=materials).fertilizer_value(scene.fertilizer)
+    except MaterialError as exc:
+        raise ConfigError("fertilizer", str(exc)) from None
+    return scene if isinstance(value, str) else scene_with(scene, {"fertilizer": value})
 
 
 def scene_with(scene: Scene, overrides: Mapping[str, Any]) -> Scene:

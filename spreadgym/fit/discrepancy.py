@@ -120,7 +120,7 @@ def paired_log_ratio(top: SimulatedPass, bottom: SimulatedPass) -> tuple[np.ndar
 
 def scene_label(scene: Scene) -> tuple[str, str, str]:
     """What a stored discrepancy is keyed by: scene name, fertilizer, granule rotation."""
-    return scene.name, scene.fertilizer, scene.granule.rotation
+    return scene.name, scene.fertilizer_name, scene.granule.rotation
 
 
 def stored_discrepancy(scene: Scene, path: Path = STORED) -> Optional[Discrepancy]:

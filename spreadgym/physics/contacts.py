@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Optional
 
+from spreadgym.config.base import brief
 from spreadgym.config.materials import Fertilizer, MaterialLibrary
 from spreadgym.config.scene import Scene
 from spreadgym.errors import MaterialError
@@ -35,9 +36,15 @@ def _pick(override: Optional[float], fertilizer: Fertilizer, quantity: str, surf
 
 def resolve_contacts(scene: Scene, library: MaterialLibrary) -> Contacts:
     """Look every pair up; a pair the paper did not measure is an error naming it."""
-    fertilizer = library.fertilizer(scene.fertilizer)
-    disc = library.check_surface(scene.spinner.material)
-    vane = library.check_surface(scene.vane_material)
+    fertilizer = library.fertilizer_of(scene)
+    known = {**dict.fromkeys(library.surfaces), **dict.fromkeys(fertilizer.friction)}
+
+    def surface(name: str) -> str:
+        if name not in known:
+            raise MaterialError(f"unknown surface material {brief(name)}; known: {', '.join(sorted(known))}")
+        return name
+
+    disc, vane = surface(scene.spinner.material), surface(scene.vane_material)
     c = scene.contact
     try:
         contact_time = _pick(c.vane_contact_time_s, fertilizer, "impact_time_s", vane)
@@ -45,7 +52,7 @@ def resolve_contacts(scene: Scene, library: MaterialLibrary) -> Contacts:
         contact_time = None
     plates = tuple(
         PlateContact(
-            friction=_pick(p.friction, fertilizer, "friction", library.check_surface(p.material)),
+            friction=_pick(p.friction, fertilizer, "friction", surface(p.material)),
             restitution=_pick(p.restitution, fertilizer, "restitution", p.material),
         )
         for p in scene.deflectors

@@ -229,14 +229,13 @@ def sample_granules(scene: Scene, fertilizer: Fertilizer, replicates: int = 1,
                            scene.sim.sampler).reshape(-1, len(INPUTS))
     u_phase, u_size, u_x, u_y = u.T
     n = u.shape[0]
-    size = fertilizer.size
+    density, size = fertilizer.granule_properties()
     d50 = scene.granule.diameter_m if scene.granule.diameter_m is not None else size.d50_m
     sd = scene.granule.diameter_sd_m if scene.granule.diameter_sd_m is not None else size.sd_m
     lo, hi = min(size.min_m, d50), max(size.max_m, d50)
     diameter = np.full(n, d50)
     if sd > 0:
         diameter = _truncated_normal(d50, sd, lo, hi, u_size)
-    density = fertilizer.particle_density_kg_m3
     mass = density * math.pi / 6.0 * diameter**3
 
     feed = scene.feed

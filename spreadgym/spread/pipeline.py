@@ -76,7 +76,7 @@ def plan_scene(scene: Scene, model: str, library: MaterialLibrary, first_replica
     """The discs, model, granules (the replicates of sim.seed from `first_replicate`) and contacts of `scene`."""
     parts = discs.discs(scene)
     chosen, reason = discs.choose_for_discs(parts, model)
-    fertilizer = library.fertilizer(scene.fertilizer)
+    fertilizer = library.fertilizer_of(scene)
     spins: list[Optional[tuple[GranuleBatch, Contacts]]] = []
     for i, disc in enumerate(parts):
         if i and discs.is_mirror_image(parts[0].scene, disc.scene):

@@ -78,7 +78,7 @@ def spinner_benchmark(granules: int = 2000, repeats: int = 3) -> list[dict]:
     library = load_library()
     scene = load_scene("paper", {"sim.granules": granules})
     contacts = resolve_contacts(scene, library)
-    batch_ = sample_granules(scene, library.fertilizer(scene.fertilizer))
+    batch_ = sample_granules(scene, library.fertilizer_of(scene))
     wall, departure = median_time(lambda: simulate_pymunk(scene, batch_, contacts), repeats)
     gone = departure.departed
     t_fall = float(departure.time_s.min())  # the closed-form fall precedes stepping
@@ -103,7 +103,7 @@ def method_speed_benchmark(granules: int = 2000, repeats: int = 3) -> list[dict]
     library = load_library()
     scene = load_scene("paper", {"sim.granules": granules, "feed.drop_height_m": 0.0})
     contacts = resolve_contacts(scene, library)
-    batch_ = sample_granules(scene, library.fertilizer(scene.fertilizer))
+    batch_ = sample_granules(scene, library.fertilizer_of(scene))
     wall_a, dep_a = median_time(lambda: simulate_analytic(scene, batch_, contacts), repeats)
     wall_p, dep_p = median_time(lambda: simulate_pymunk(scene, batch_, contacts), repeats)
     return [{

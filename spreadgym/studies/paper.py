@@ -132,7 +132,7 @@ def _run_case(case: Case, granules: int, rotation: str, model: str, seed: int, l
     scene = study_scene(case, granules, rotation, seed)
     contacts = resolve_contacts(scene, library)
     chosen, _ = choose_model(scene, model)
-    fertilizer = library.fertilizer(scene.fertilizer)
+    fertilizer = library.fertilizer_of(scene)
     batch = sample_granules(scene, fertilizer)
     departure = run_spinner(scene, batch, contacts, chosen)
     stats = departure_statistics(departure, scene.spinner.omega_rad_s)
@@ -398,7 +398,7 @@ def _plot_sweep(rows, sweep, path) -> Path:
     pad = 0.08 * (hi - lo) if hi > lo else 0.1 * hi
     grid = np.linspace(max(lo - pad, 1e-6), hi + pad, 120)
     base = load_scene(SCENE)
-    fertilizer = load_library().fertilizer(base.fertilizer)
+    fertilizer = load_library().fertilizer_of(base)
     for rotation in ROTATIONS:
         picked = sorted(_pick(rows, sweep, rotation), key=lambda r: r[key])
         if not picked:

@@ -35,7 +35,7 @@ DEFAULT_SEEDS = 16
 
 def automatic_dt(scene: Scene) -> float:
     """The pymunk model's automatic step for this scene (smallest granule radius), s."""
-    fertilizer = load_library().fertilizer(scene.fertilizer)
+    fertilizer = load_library().fertilizer_of(scene)
     return choose_time_step(scene, 0.5 * min(fertilizer.size.min_m, fertilizer.size.d50_m)).dt_s
 
 

@@ -32,11 +32,11 @@ def test_batched_sobol_points_equal_scipys_engine(count):
 def test_sampled_granules_equal_those_of_one_engine_per_replicate():
     library = load_library()
     scene = scene_with(load_scene("paper"), {"sim.granules": 4096, "sim.seed": 3})
-    batch = granules.sample_granules(scene, library.fertilizer(scene.fertilizer), replicates=8, first_replicate=2)
+    batch = granules.sample_granules(scene, library.fertilizer_of(scene), replicates=8, first_replicate=2)
     u = np.vstack([scipy_uniforms(3, 2 + k, 512) for k in range(8)])
     assert np.array_equal(batch.phase_rad, 2.0 * np.pi * u[:, 0])
     assert np.array_equal(batch.replicate, np.repeat(np.arange(8), 512))
-    again = granules.sample_granules(scene, library.fertilizer(scene.fertilizer), replicates=8, first_replicate=2)
+    again = granules.sample_granules(scene, library.fertilizer_of(scene), replicates=8, first_replicate=2)
     for name in ("diameter_m", "mass_kg", "release_xy_m", "phase_rad"):
         assert np.array_equal(getattr(batch, name), getattr(again, name))
 

@@ -22,7 +22,7 @@ def paper(**settings):
 
 
 def sampled(scene):
-    return sample_granules(scene, LIBRARY.fertilizer(scene.fertilizer), scene.sim.replicates)
+    return sample_granules(scene, LIBRARY.fertilizer_of(scene), scene.sim.replicates)
 
 
 def mean_resultant(kappa):
@@ -128,7 +128,7 @@ def test_each_copy_thrown_onto_the_other_disc_is_intercepted():
     scene = load_scene("twin-field", {"sim.granules": 1024, "sim.angle_copies": 4, "feed.angle_deg": 100.0})
     result = run_scene(scene, model="analytic")
     first = discs.discs(scene)[0]
-    g = sample_granules(first.scene, LIBRARY.fertilizer(scene.fertilizer), scene.sim.replicates)
+    g = sample_granules(first.scene, LIBRARY.fertilizer_of(scene), scene.sim.replicates)
     turned = shifts(g, first.scene, 4, scene.sim.seed).ravel()
     half = result.granules.count // 2
     centre = np.asarray(first.centre_m)

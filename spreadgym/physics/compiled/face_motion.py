@@ -148,4 +148,4 @@ def step(x, xd, s, h, sticking, eps, rho, drag_sign, frame, radius, length, P, w
         if converged:
             break
     ex, exd, es = _rk4(x, xd, s, f * h, sticking, eps, rho, drag_sign, frame, radius, P)
-    return ex, exd, es, f * h, (LEAVE_NORMAL, SLIP_CHANGE, STOPPED, END_OF_FACE, RIM)[which]
+    return ex, exd, es, f * h, (LEAVE_NORMAL, SLIP_CHANGE, STOPPED, END_OF_FACE, RIM, SPIN_STOP)[which]

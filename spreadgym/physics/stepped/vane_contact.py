@@ -22,6 +22,9 @@ sliding, holds a rolling or sticking contact without chatter, adds no stiffness
 (so no extra step limit), and cannot reverse the slip. It is the same guard as the
 disc friction's (`disc_friction.py`). The friction torque spins a `free` granule
 (sphere, I = 2/5 m r^2, spin about z); a `locked` one has I = inf and no spin.
+The vane's rolling resistance mu_r follows the friction within the step, as in the
+other models: an angular impulse of mu_r r max(F_n, 0) dt against the spin relative to
+the vane, capped at stopping it.
 """
 
 from __future__ import annotations
@@ -60,7 +63,7 @@ def explicit_critical_step_s(restitution: float, contact_time_s: float) -> float
 
 
 def vane_pair(scene: Scene) -> str:
-    return f"{scene.fertilizer}/{scene.vane_material}"
+    return f"{scene.fertilizer_name}/{scene.vane_material}"
 
 
 def contact_time_s(scene: Scene, contacts: Contacts) -> float:
@@ -91,6 +94,7 @@ class VaneContactLaw:
     stiffness_per_mass: float  # omega_n^2, 1/s^2
     damping_per_mass: float  # 2 zeta omega_n, 1/s
     friction: float  # mu_v
+    rolling_resistance: float  # mu_r
     inner_m: np.ndarray  # (K, 2) vane inner ends at spinner angle 0
     direction: np.ndarray  # (K, 2) unit vectors along the vanes
     length_m: np.ndarray  # (K,)
@@ -102,8 +106,8 @@ class VaneContactLaw:
         inner, outer = vane_segments(scene)
         along = outer - inner
         length = np.hypot(along[:, 0], along[:, 1])
-        return cls(kn, cn, float(contacts.vane_friction), inner, along / length[:, None], length,
-                   0.5 * scene.vanes.thickness_m)
+        return cls(kn, cn, float(contacts.vane_friction), float(contacts.vane_rolling_resistance), inner,
+                   along / length[:, None], length, 0.5 * scene.vanes.thickness_m)
 
     inner_complex: np.ndarray = field(init=False, repr=False)  # (K, 1) complex forms of the
     direction_complex: np.ndarray = field(init=False, repr=False)  # vanes: turned in two products
@@ -254,6 +258,10 @@ def vane_contact_change(
     change_y = jn * ny + ft * nx
     # Torque (-r n) x (f t) = -r f: spin change -ft / (kappa r).
     spin_change = -ft * granule.spin_gain[gi]
+    if law.rolling_resistance > 0.0:  # then the rolling resistance, against the spin relative to the vane
+        relative_spin = spin_rad_s[gi] + spin_change - omega_rad_s
+        most = (law.rolling_resistance * dt_s) * np.maximum(an, 0.0) * granule.spin_gain[gi]
+        spin_change -= np.sign(relative_spin) * np.minimum(most, np.abs(relative_spin))
     if shared:
         dv[0] = np.bincount(gi, change_x, minlength=n)
         dv[1] = np.bincount(gi, change_y, minlength=n)
