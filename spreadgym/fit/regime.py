@@ -17,7 +17,8 @@ An interval inside which the vane friction turns granules over therefore places 
 model's change of regime, not the spreader's friction (`uncertainty.determined`). Other
 keys change the regime too (restitution: rebounds that settle into rolling), but there
 the compiled model follows the full model's rebounds down to its time step and places
-the change alike (docs/fit.md); only the friction's is counted.
+the change alike (docs/fit.md); only the friction's and the rolling resistance's are
+counted (REGIME_KEYS).
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ import numpy as np
 from spreadgym.spread.discs import discs
 from spreadgym.spread.pipeline import SimulationResult
 
-VANE_FRICTION = "contact.vane_friction"  # the key that sets the friction limit of rolling on the vane
+REGIME_KEYS = ("contact.vane_friction", "contact.rolling_resistance")
+"""The keys that set a roll's limits: the friction that holds it and the resistance that
+slows it (with mu_r >= mu_v a granule slides); moving them turns granules over."""
 ROLLING_SLIP = 0.01  # a granule leaves rolling when its contact point slips by under 1 % of its speed over the disc
 # (the compiled model's rolling granules leave at exactly 0, the full model's at 0.001-0.005: its contact is stepped)
 

@@ -13,7 +13,7 @@ from spreadgym.errors import SpreadgymError
 from spreadgym.fit import optimise, uncertainty
 from spreadgym.fit.discrepancy import Discrepancy, stored_discrepancy
 from spreadgym.fit.likelihood import PatternModel, residuals
-from spreadgym.fit.regime import VANE_FRICTION
+from spreadgym.fit.regime import REGIME_KEYS
 from spreadgym.fit.space import FitSpace
 from spreadgym.fit.trays import TrayTest
 from spreadgym.physics.selection import choose_model
@@ -45,7 +45,7 @@ class FitResult:
     model_sd: np.ndarray  # (d,) its s.d. from the fit model's discrepancy from the full model, key units
     bare_low: np.ndarray  # (d,) the 90 % interval without the model's discrepancy (to measure what it adds)
     bare_high: np.ndarray
-    regime_switch: np.ndarray  # (d,) share of the granules the vane friction turns between sliding and rolling
+    regime_switch: np.ndarray  # (d,) share of the granules the roll's limits turn between sliding and rolling
     # inside each interval (uncertainty.regime_switches)
     bare_regime_switch: np.ndarray  # (d,) the same inside the intervals without the model's discrepancy
     discrepancy_points: int  # calibration points behind model_sd (0: none carried)
@@ -106,9 +106,9 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
                       for j, i in enumerate(intervals)))
     bare_low, bare_high = zip(*(uncertainty.widened(best.unit[j], i.low, i.high, [(sim_sd[j], replicates - 1)])
                                 for j, i in enumerate(intervals)))
-    friction = space.keys.index(VANE_FRICTION) if VANE_FRICTION in space.keys else None
-    switch = uncertainty.regime_switches(objective, intervals, low, high, friction)
-    bare_switch = uncertainty.regime_switches(objective, intervals, bare_low, bare_high, friction)
+    regime = [space.keys.index(key) for key in REGIME_KEYS if key in space.keys]
+    switch = uncertainty.regime_switches(objective, intervals, low, high, regime)
+    bare_switch = uncertainty.regime_switches(objective, intervals, bare_low, bare_high, regime)
     points = [p for i in intervals for p in (i.low_point, i.high_point)]
     open_ends = [(bool(i.low_open or lo == 0.0), bool(i.high_open or hi == 1.0))
                  for i, lo, hi in zip(intervals, low, high)]

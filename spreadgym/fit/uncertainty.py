@@ -24,7 +24,7 @@ as drag coefficient x air density shows at once.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Sequence
 
 import numpy as np
 from scipy.stats import f as f_distribution
@@ -121,20 +121,21 @@ def determined(low: float, high: float, switch: float) -> bool:
 
 
 def regime_switches(objective: Objective, intervals: Sequence[Interval], low: Sequence[float],
-                    high: Sequence[float], friction: Optional[int]) -> np.ndarray:
-    """(d,) per key j, the share of the granules whose regime the vane friction changes
-    between its interval's two ends: the profile's low end (key j moved to `low`[j], unit
-    cube) against the same point with the friction coordinate `friction` moved to its value
-    at the high end (key j at `high`[j]); all simulated in one batch. Zeros when the
-    friction is not fitted (`friction` None): the regime then does not move with the fit."""
-    if friction is None:
+                    high: Sequence[float], regime_keys: Sequence[int]) -> np.ndarray:
+    """(d,) per key j, the share of the granules whose regime the keys that set the roll's
+    limits (vane friction, rolling resistance: coordinates `regime_keys`) change between
+    its interval's two ends: the profile's low end (key j moved to `low`[j], unit cube)
+    against the same point with those coordinates moved to their values at the high end
+    (key j at `high`[j]); all simulated in one batch. Zeros when none is fitted: the regime
+    then does not move with the fit."""
+    if not regime_keys:
         return np.zeros(len(intervals))
     pairs = []
     for j, interval in enumerate(intervals):
         start, end = interval.low_point.copy(), interval.high_point.copy()
         start[j], end[j] = low[j], high[j]
         moved = start.copy()
-        moved[friction] = end[friction]
+        moved[list(regime_keys)] = end[list(regime_keys)]
         pairs += [start, moved]
     runs = objective.model.predict(pairs)
     return np.array([switched(runs[2 * j].rolling, runs[2 * j + 1].rolling) for j in range(len(intervals))])

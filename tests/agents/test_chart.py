@@ -143,7 +143,7 @@ BASE = ["chart", "--scene", "paper", "--fertilizers", FERTILIZER, "--widths", "3
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--fertilizers", "urea"], "unknown fertilizer 'urea'"),
+    (["--fertilizers", "guano"], "unknown fertilizer 'guano'"),
     (["--fertilizers", "mixture-17-21-17"], "mixture-17-21-17/mc was not measured"),
     (["--widths", "3,3.2"], "3.2 m is off the tray grid"),
     (["--widths", "3,60"], "60 m is beyond what the scene can throw"),

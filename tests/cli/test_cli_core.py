@@ -104,7 +104,7 @@ def _with(flag, value):
         (["calibrate", "--paper-table", "--mass", "1e-5"], "--paper-table"),
         (["calibrate", "--fertilizer", "pellet"], "--surface"),
         (["calibrate", "--fertilizer", "pellet", "--surface", "mc", "--restitution", "0.5"], "--restitution"),
-        (["calibrate", "--fertilizer", "urea", "--surface", "mc"], "unknown fertilizer 'urea'"),
+        (["calibrate", "--fertilizer", "guano", "--surface", "mc"], "unknown fertilizer 'guano'"),
         (["calibrate", "--fertilizer", "pellet", "--surface", "glass"], "unknown surface material 'glass'"),
         (["calibrate", "--fertilizer", "pellet", "--surface", "rubber"], "pellet/rubber"),
         (["calibrate", "--fertilizer", "pellet", "--surface", "mc", "--mass", "0"], r"--mass: 0 outside"),

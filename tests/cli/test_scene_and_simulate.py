@@ -47,8 +47,8 @@ def test_unknown_key_is_named():
 def test_unknown_materials_and_fertilizers_are_named(library):
     with pytest.raises(MaterialError, match="'wood'"):
         resolve_contacts(load_scene("paper", {"spinner.material": "wood"}), library)
-    with pytest.raises(MaterialError, match="unknown fertilizer 'urea'"):
-        resolve_contacts(load_scene("paper", {"fertilizer": "urea"}), library)
+    with pytest.raises(MaterialError, match="unknown fertilizer 'guano'"):
+        resolve_contacts(load_scene("paper", {"fertilizer": "guano"}), library)
     with pytest.raises(MaterialError, match="mixture-17-21-17/mc"):
         resolve_contacts(load_scene("paper", {"fertilizer": "mixture-17-21-17"}), library)
     # ... unless the scene supplies the missing pair values

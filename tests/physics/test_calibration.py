@@ -308,7 +308,7 @@ def test_default_contact_warns_for_a_flagged_row():
 @pytest.mark.parametrize(
     "fertilizer, surface, text",
     [
-        ("urea", "mc", "unknown fertilizer 'urea'"),
+        ("guano", "mc", "unknown fertilizer 'guano'"),
         ("pellet", "glass", "unknown surface material 'glass'"),
         ("pellet", "aluminum", "pellet/aluminum"),
         ("mixture-17-21-17", "mc", "mixture-17-21-17/mc"),

@@ -185,8 +185,9 @@ def test_compiled_follows_the_closed_form_phases(prepare, pitch_deg, mu_v, mu_r,
     there (as in test_compiled's check without rolling resistance). The early phases at a
     few mm/s (slip, stop and spin events within a step) cost the default step up to 6e-5 s
     (measured; 4e-6 without resistance): half the step is at least 2x closer."""
-    from spreadgym.physics.compiled import layout
     from test_compiled import released_on_a_vane
+
+    from spreadgym.physics.compiled import layout
 
     scene = flat_feed(mu_v, mu_r, **{"vanes.pitch_deg": pitch_deg, "contact.vane_restitution": 0.0,
                                      "contact.disc_friction": 0.0})

@@ -108,7 +108,8 @@ class PhaseMachine:
         x_R = np.sqrt(np.maximum(R * R - w * w, 0.0))
         x_end = np.minimum(x_R, x_tip)
         self.c = _Granules(
-            face=Face(Om, w, x_in, x_tip, R), mu_v=mu_v, mu_r=mu_r, mu_full=mu_full, r=r, tlim=tlim, t_on=t_on, e_rest=e_rest,
+            face=Face(Om, w, x_in, x_tip, R), mu_v=mu_v, mu_r=mu_r, mu_full=mu_full, r=r, tlim=tlim, t_on=t_on,
+            e_rest=e_rest,
             x_R=x_R, x_end=x_end, tip_first=x_tip < x_R, t_eps=1e-10 / np.maximum(Om, 1e-300),
             # a rounding-level negative N is not a flight
             n_tol=1e-7 * Om * Om * (np.abs(x_end) + np.abs(w)),
@@ -365,7 +366,6 @@ class PhaseMachine:
     def _first_event(self, idx, phase: "_Phase"):
         """(time, kind) of the first event that ends the phase of each granule of `idx`."""
         s, c, g, q = self.s, self.c, self.options.g, self.q
-        kappa = self.options.kappa
         om, xx, vv, ww = c.face.omega_abs[idx], s.x[idx], s.v[idx], c.face.w[idx]
         sm, se, st = s.sgn_m[idx], s.sgn_e[idx], s.stick[idx]
         mv, md = c.mu_v[idx], s.mu_d[idx]
