@@ -16,7 +16,7 @@ from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
             "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "env-noise", "chart-quality",
-            "fit", "batch")
+            "fit", "batch", "validation")
 """Every section, in the order `make bench` runs them (`section_runners` gives each its work)."""
 
 
@@ -48,6 +48,7 @@ def section_runners(args: argparse.Namespace, say) -> dict:
         speed_accuracy,
         stability,
         startup,
+        validation,
     )
 
     return {
@@ -73,6 +74,7 @@ def section_runners(args: argparse.Namespace, say) -> dict:
         "fit": lambda: fit_bench.fit_bench_rows(args.out, tests=40, workers=max(1, len(os.sched_getaffinity(0)) // 2),
                                                 progress=say),
         "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
+        "validation": lambda: validation.write_validation(args.out, say),
     }
 
 

@@ -62,17 +62,24 @@ class FertilizerSpec(StrictModel):
     name: Optional[str] = Field(default=None, description="inline only: the name results print")
     description: str = ""
     particle_density_kg_m3: Optional[Real] = Field(gt=0, le=10_000, description="null: not measured (cannot run)")
-    bulk_density_kg_m3: Optional[Real] = Field(default=None, gt=0, le=10_000)
-    repose_angle_deg: Optional[Real] = Field(default=None, ge=0, le=90)
-    test_conditions: dict[str, Optional[Real]] = Field(default_factory=dict)
-    friction: PairTable
-    restitution: PairTable
-    impact_time_s: PairTable = Field(default_factory=dict)
-    rolling_resistance: Optional[PairTable] = None
-    paper_stiffness_n_per_m: dict[str, Real] = Field(default_factory=dict)
-    paper_damping_ns_per_m: dict[str, Real] = Field(default_factory=dict)
+    bulk_density_kg_m3: Optional[Real] = Field(default=None, gt=0, le=10_000, description="informational")
+    repose_angle_deg: Optional[Real] = Field(default=None, ge=0, le=90, description="informational")
+    test_conditions: dict[str, Optional[Real]] = Field(default_factory=dict, description="informational")
+    friction: PairTable = Field(description="surface -> sliding friction on the vanes and disc, [0, 2] or null")
+    restitution: PairTable = Field(description="surface -> restitution of an impact, [0, 1] or null")
+    impact_time_s: PairTable = Field(default_factory=dict,
+                                     description="surface -> contact time of an impact, (0, 0.01] s or null "
+                                                 "(the spring-damper model only)")
+    rolling_resistance: Optional[PairTable] = Field(
+        default=None, description="surface -> rolling resistance at the vanes, [0, 2] or null; left out: 0 on "
+                                  "every surface of `friction` (loss-free rolling)")
+    paper_stiffness_n_per_m: dict[str, Real] = Field(default_factory=dict,
+                                                     description="the seed study's Table 3 (its consistency check)")
+    paper_damping_ns_per_m: dict[str, Real] = Field(default_factory=dict,
+                                                    description="the seed study's Table 3 (its consistency check)")
     size: Optional[SizeSpec] = Field(description="null: not measured (cannot run)")
-    provenance: dict[str, str] = Field(default_factory=dict)
+    provenance: dict[str, str] = Field(default_factory=dict,
+                                       description="key -> 'SOURCE: what was measured, how it became the number'")
 
     @model_validator(mode="after")
     def _pairs_in_range(self) -> "FertilizerSpec":

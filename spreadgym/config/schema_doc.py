@@ -56,6 +56,8 @@ def rows(model: type[BaseModel], prefix: str = "") -> Iterator[tuple[str, str, s
         inner = _model_inside(field.annotation)
         if inner is not None:
             marker = "[i]" if "list" in str(field.annotation) else ""
+            if "str" in str(field.annotation):  # a name, or the mapping whose keys follow
+                yield key, f"text or mapping ({key}.* below)", "required", "", field.description or ""
             yield from rows(inner, f"{key}{marker}.")
             continue
         default = "required" if field.default is PydanticUndefined and field.default_factory is None \

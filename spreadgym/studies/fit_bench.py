@@ -1,8 +1,9 @@
 """How honest is `spreadgym fit`? Synthetic tray tests at known parameters (`make bench`, section fit).
 
 Each test: a scene (paper or field), a fertilizer (compound-10-16-10 or pellet), the
-granules sliding (rotation locked) or free to roll, and true vane friction and vane
-restitution drawn from a scrambled Sobol sequence. The truth is simulated with
+granules sliding (rotation locked) or free to roll, and true vane friction, vane
+restitution and (free granules) vane rolling resistance drawn from a scrambled Sobol
+sequence; the free granules' fit searches the rolling resistance too (in [0, 0.6]). The truth is simulated with
 `truth_model` (the full model, pymunk, by default) at `truth_granules` granules and a
 seed no fit uses, caught by 0.5 m trays in one pass with 5 % log-normal catch noise;
 the fit (compiled model, its granules drawn with sim.seed = the test's index, so every
@@ -26,12 +27,21 @@ import numpy as np
 from scipy.stats import beta
 
 from spreadgym.fit.synthetic import CATCH_SD
+from spreadgym.physics.analytic.outlet import equivalent_friction
 
 SCENES = ("paper", "field")
 FERTILIZERS = ("compound-10-16-10", "pellet")
 ROTATIONS = ("locked", "free")
-TRUTH_RANGES = {"contact.vane_friction": (0.3, 0.6), "contact.vane_restitution": (0.35, 0.55)}
+TRUTH_RANGES = {"contact.vane_friction": (0.3, 0.6), "contact.vane_restitution": (0.35, 0.55),
+                "contact.rolling_resistance": (0.0, 0.4)}
 SEARCH = "contact.vane_friction=0.2:0.8,contact.vane_restitution=0.2:0.7"
+ROLLING_SEARCH = "contact.rolling_resistance=0:0.6"  # free granules only: locked ones do not turn
+KEYS = ("vane_friction", "vane_restitution", "rolling_resistance")
+
+
+def search_for(rotation: str) -> list[str]:
+    """The --fit specs of a test: vane friction and restitution, and the rolling resistance where granules turn."""
+    return [SEARCH, ROLLING_SEARCH] if rotation == "free" else [SEARCH]
 FRICTION_TOLERANCE = 0.05
 COVERAGE_TARGET = (0.80, 0.98)
 TRUTH_CACHE = Path("out/fit-truths")  # gitignored: the truths' simulated passes, keyed by scene and model
@@ -45,6 +55,8 @@ def cases(tests: int, seed: int = 0) -> list[dict]:
     out = []
     for i, truth in enumerate(sobol_points(TRUTH_RANGES, tests, seed)):
         scene, fertilizer, rotation = combos[i % len(combos)]
+        if rotation == "locked":  # no rolling resistance without rotation: not a truth to recover
+            truth = {k: v for k, v in truth.items() if k != "contact.rolling_resistance"}
         out.append({"test": i, "scene": scene, "fertilizer": fertilizer, "rotation": rotation, "truth": truth})
     return out
 
@@ -66,7 +78,8 @@ def run_case(case: dict, truth_model: str, truth_granules: int, fit_granules: in
     fitted = scene_with(scene, {"sim.seed": case["test"]})  # each test its own draw of the fit's granules
     test = synthetic_tray_test(scene, case["truth"], model=truth_model, granules=truth_granules,
                                noise_seed=case["test"], catch_sd=catch_sd, cache=cache)
-    fit = fit_tray_test(fitted, parse_fit_specs([SEARCH], scene), test, granules=fit_granules, seed=case["test"])
+    fit = fit_tray_test(fitted, parse_fit_specs(search_for(case["rotation"]), scene), test, granules=fit_granules,
+                        seed=case["test"])
     row = {key: case[key] for key in ("test", "scene", "fertilizer", "rotation")}
     for j, key in enumerate(fit.space.keys):
         name = key.split(".")[-1]
@@ -120,7 +133,7 @@ def _say(progress, row: dict) -> None:
     if progress:
         keys = ", ".join(f"{name} {row[f'{name}_truth']} -> {row[f'{name}_estimate']:.3f} "
                          f"[{row[f'{name}_low']:.3f}, {row[f'{name}_high']:.3f}]"
-                         for name in ("vane_friction", "vane_restitution"))
+                         for name in KEYS if f"{name}_truth" in row)
         progress(f"fit test {row['test']}: {row['scene']} {row['fertilizer']} {row['rotation']}: {keys}, "
                  f"{row['fit_wall_s']:.0f} s")
 
@@ -142,31 +155,33 @@ def fit_markdown(rows: list[dict], fit_granules: int, truth_granules: int, worke
     lines = ["# Fit bench: synthetic tray tests", "",
              f"{len(rows)} tests; truth: {rows[0]['truth_model'] if rows else '-'} model, {truth_granules} granules, "
              f"{100 * catch_sd:g} % catch noise, 0.5 m trays, one pass; fit: compiled model, {fit_granules} "
-             f"granules per evaluation, search {SEARCH}; {workers} worker(s) x {threads} thread(s).", "",
+             f"granules per evaluation, search {SEARCH} (rolling granules also {ROLLING_SEARCH}); {workers} "
+             f"worker(s) x {threads} thread(s).", "",
              "Intervals with the model discrepancy carried (the fit's) and without it (the profile and the "
              "simulation's error only: the fit before the discrepancy was added), on the same tests:", "",
              "| key | intervals | tests | identifiable (sliding / rolling) | 90 % coverage (identifiable) "
              "| coverage (all) |", "|---|---|---|---|---|---|"]
-    for name in ("vane_friction", "vane_restitution"):
+    for name in KEYS:
+        fitted = [r for r in rows if f"{name}_truth" in r]
         for label, prefix in (("with discrepancy", name), ("without", f"{name}_bare")):
-            ident = [r for r in rows if r[f"{prefix}_identifiable"]]
+            ident = [r for r in fitted if r[f"{prefix}_identifiable"]]
             split = " / ".join(str(sum(r["rotation"] == rotation for r in ident)) for rotation in ROTATIONS)
-            lines.append(f"| {name} | {label} | {len(rows)} | {len(ident)} ({split}) | "
+            lines.append(f"| {name} | {label} | {len(fitted)} | {len(ident)} ({split}) | "
                          f"{_share(sum(r[f'{prefix}_covered'] for r in ident), len(ident))} | "
-                         f"{_share(sum(r[f'{prefix}_covered'] for r in rows), len(rows))} |")
+                         f"{_share(sum(r[f'{prefix}_covered'] for r in fitted), len(fitted))} |")
     lines += ["", f"Called not identifiable because the vane friction turns more than {100 * REGIME_SWITCH:.0f} % of "
                   "the granules between sliding and rolling inside the interval, though it covers at most half the "
                   "range (intervals with the discrepancy):", "",
               "| key | tests | covered |", "|---|---|---|"]
-    for name in ("vane_friction", "vane_restitution"):
-        regime = [r for r in rows if r[f"{name}_narrow"] and not r[f"{name}_identifiable"]]
+    for name in KEYS:
+        regime = [r for r in rows if f"{name}_truth" in r and r[f"{name}_narrow"] and not r[f"{name}_identifiable"]]
         lines.append(f"| {name} | {len(regime)} | {_share(sum(r[f'{name}_covered'] for r in regime), len(regime))} |")
     lines += ["", "Median s.d. of the estimate from the model discrepancy (from the simulation's error):", "",
               "| key | sliding (locked) | rolling (free) |", "|---|---|---|"]
-    for name in ("vane_friction", "vane_restitution"):
+    for name in KEYS:
         cells = []
         for rotation in ROTATIONS:
-            subset = [r for r in rows if r["rotation"] == rotation]
+            subset = [r for r in rows if r["rotation"] == rotation and f"{name}_truth" in r]
             cells.append(f"{statistics.median(r[f'{name}_model_sd'] for r in subset):.3f} "
                          f"({statistics.median(r[f'{name}_simulation_sd'] for r in subset):.3f})" if subset else "-")
         lines.append(f"| {name} | {' | '.join(cells)} |")
@@ -176,6 +191,18 @@ def fit_markdown(rows: list[dict], fit_granules: int, truth_granules: int, worke
                           ("reported identifiable", [r for r in rows if r["vane_friction_identifiable"]])):
         hits = sum(abs(r["vane_friction_estimate"] - r["vane_friction_truth"]) <= FRICTION_TOLERANCE for r in subset)
         lines.append(f"| {label} | {len(subset)} | {_share(hits, len(subset))} |")
+    lines += ["", "What a rolling test determines: the equivalent friction min(mu_v, mu_star(mu_r)) of the estimates "
+                  "against the truth's (physics/analytic/outlet.py; the outlet angle of a granule far out on a radial "
+                  "vane depends on nothing else):", "", "| rolling tests | equivalent friction within +-0.05 | "
+                  "median abs error | rolling resistance within +-0.05 |", "|---|---|---|---|"]
+    rolling = [r for r in rows if "rolling_resistance_truth" in r]
+    if rolling:
+        errors = [abs(equivalent_friction(r["vane_friction_estimate"], r["rolling_resistance_estimate"])
+                      - equivalent_friction(r["vane_friction_truth"], r["rolling_resistance_truth"])) for r in rolling]
+        roll_hits = sum(abs(r["rolling_resistance_estimate"] - r["rolling_resistance_truth"]) <= FRICTION_TOLERANCE
+                        for r in rolling)
+        lines.append(f"| {len(rolling)} | {_share(sum(e <= FRICTION_TOLERANCE for e in errors), len(rolling))} | "
+                     f"{statistics.median(errors):.3f} | {_share(roll_hits, len(rolling))} |")
     lines += ["", "| scene | fits | median wall (s) | max wall (s) | median evaluations |", "|---|---|---|---|---|"]
     for scene in SCENES:
         subset = [r for r in rows if r["scene"] == scene]

@@ -139,14 +139,15 @@ def terminal_rows() -> list[dict]:
     return rows
 
 
-def write_validation(out: Path, progress: Optional[Callable[[str], None]] = None) -> dict[str, list[dict]]:
-    """Run the three comparisons; write out/validation-outlet.csv, -sweep.csv, -terminal.csv."""
+def write_validation(out: Path, progress: Optional[Callable[[str], None]] = None) -> list[dict]:
+    """Run the three comparisons; write out/validation-sweep.csv and -terminal.csv; the
+    outlet-angle rows (`make bench` writes them as validation.csv)."""
     say = progress or (lambda _: None)
-    tables = {"outlet": outlet_rows(progress=say), "sweep": sweep_rows(progress=say), "terminal": terminal_rows()}
+    outlet = outlet_rows(progress=say)
     out.mkdir(parents=True, exist_ok=True)
-    for name, rows in tables.items():
+    for name, rows in (("sweep", sweep_rows(progress=say)), ("terminal", terminal_rows())):
         with open(out / f"validation-{name}.csv", "w", newline="", encoding="utf-8") as handle:
             writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
             writer.writeheader()
-            writer.writerows({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()} for row in rows)
-    return tables
+            writer.writerows(rows)
+    return outlet
