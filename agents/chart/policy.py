@@ -72,6 +72,11 @@ def check_policy(path, scene: Scene) -> tuple[str, str]:
     return str(file), digest
 
 
+def policy_fertilizers(path: str, digest: str) -> tuple[str, ...]:
+    """The fertilizers the policy's environment was trained on."""
+    return tuple(_loaded(path, digest)[1].task.cfg.context.fertilizers)
+
+
 def propose(spec, cell, seq: np.random.SeedSequence) -> np.ndarray:
     """The policy's settings for `cell`, as a unit vector of the chart's settings space."""
     policy, env = _loaded(spec.policy, spec.policy_sha256)

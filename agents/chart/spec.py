@@ -257,6 +257,7 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
         from spreadgym.agents.chart.policy import check_policy, shipped_policy
 
         policy, digest = check_policy(shipped_policy(base, method) if policy is None else policy, base)
+        names, notes = _policy_fertilizers(names, notes, fertilizers, policy, digest)
     spec = ChartSpec(base.model_dump(mode="json"), names, tuple(sorted(widths_m)), driving, int(budget), granules,
                      int(seed), search_model, verify_model, int(verify_runs), settings, objective, method, policy,
                      digest, variability, steady_tolerance_pp)
@@ -276,6 +277,20 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
             raise SpreadgymError(f"--widths: {too_wide[0]:g} m is beyond what the scene can throw {name}: the widest "
                                  f"single-pass pattern within the settings' ranges is {reach:g} m")
     return spec, notes
+
+
+def _policy_fertilizers(names, notes, requested, policy, digest) -> tuple[tuple[str, ...], list[str]]:
+    """The fertilizers a policy method can chart: `all` keeps those the policy was trained
+    on (the others noted); a named one it does not know is an error naming it."""
+    from spreadgym.agents.chart.policy import policy_fertilizers
+
+    known = policy_fertilizers(policy, digest)
+    unknown = [name for name in names if name not in known]
+    if unknown and requested not in ("all", ["all"], ("all",)):
+        raise SpreadgymError(f"--fertilizers {unknown[0]}: the policy {policy} was trained without it (it knows "
+                             f"{', '.join(known)}); chart it with --method cmaes")
+    notes = notes + [f"{name} left out: the policy was trained without it" for name in unknown]
+    return tuple(name for name in names if name in known), notes
 
 
 def check_steady_tolerance(value) -> float:

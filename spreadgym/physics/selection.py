@@ -109,13 +109,29 @@ VALIDATED = {
     "pitch_deg": (-30.0, 30.0),
     "drop_height_m": (0.0, 0.08),
     "radius_m": (0.15, 0.30),
+    "rolling_resistance": (0.0, 0.31),
 }
+
+
+def _rolling_resistance(scene: Scene) -> float:
+    """The vane rolling resistance the scene runs with (0 where its pair is not known: the
+    run itself then names the missing pair)."""
+    from spreadgym.config.materials import load_library
+    from spreadgym.errors import MaterialError
+
+    if scene.contact.rolling_resistance is not None:
+        return float(scene.contact.rolling_resistance)
+    try:
+        return load_library().fertilizer_of(scene).pair("rolling_resistance", scene.vane_material)
+    except MaterialError:
+        return 0.0
 
 
 def outside_validated(scene: Scene) -> list[str]:
     """What puts `scene` outside the envelope `compiled` was validated in (empty: inside)."""
     values = {"rpm": [scene.spinner.rpm], "pitch_deg": scene.vanes.per_vane("pitch_deg"),
-              "drop_height_m": [scene.feed.drop_height_m], "radius_m": [scene.spinner.radius_m]}
+              "drop_height_m": [scene.feed.drop_height_m], "radius_m": [scene.spinner.radius_m],
+              "rolling_resistance": [_rolling_resistance(scene)]}
     out = []
     for key, (lo, hi) in VALIDATED.items():
         bad = [v for v in values[key] if not lo - 1e-9 <= v <= hi + 1e-9]

@@ -33,7 +33,12 @@ def test_the_shipped_policy_is_a_small_spinner_design_policy_of_the_paper_charts
     env = gymnasium.make(policy.env_id, **policy.env_kwargs).unwrapped
     assert env.task.base_scene.name == "paper"
     charted = resolve_fertilizers("all", load_scene("paper"), load_library())[0]
-    assert set(charted) <= set(env.task.cfg.context.fertilizers)
+    assert {"compound-10-16-10", "pellet"} <= set(env.task.cfg.context.fertilizers) & set(charted)
+    spec, notes = make_spec("paper", "all", "3", method="policy")
+    assert set(spec.fertilizers) == set(charted) & set(env.task.cfg.context.fertilizers)
+    assert any("potassium-chloride left out: the policy was trained without it" in n for n in notes)
+    with pytest.raises(SpreadgymError, match="--fertilizers potassium-chloride: the policy .* was trained without it"):
+        make_spec("paper", "potassium-chloride", "3", method="policy")
     low, high = env.task.cfg.context.target_swath_m
     assert low <= 3.0 and high >= 6.0
 
