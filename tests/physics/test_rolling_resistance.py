@@ -23,18 +23,10 @@ from spreadgym.physics.compiled.model import simulate_compiled
 from spreadgym.physics.departure import DEPARTED
 from spreadgym.physics.stepped.pymunk_spinner import simulate_pymunk
 from spreadgym.physics.stepped.spring_damper import simulate_spring_damper
+from spreadgym.studies.validation import outlet_angles_deg
 
 G = 9.81
 KAPPA = 0.4
-
-
-def outlet_angles_deg(departure):
-    """Angle (deg) of each departed granule's velocity from the tangent at its position."""
-    p, v = departure.position_m[departure.departed], departure.velocity_m_s[departure.departed]
-    r = np.hypot(p[:, 0], p[:, 1])
-    radial = (p[:, 0] * v[:, 0] + p[:, 1] * v[:, 1]) / r
-    tangential = (p[:, 0] * v[:, 1] - p[:, 1] * v[:, 0]) / r
-    return np.degrees(np.arctan2(radial, np.abs(tangential)))
 
 
 # --- closed forms ---------------------------------------------------------------------------
