@@ -197,10 +197,11 @@ class MaterialLibrary:
         entry = self.user_entries.get(name)
         return name if entry is None else {**entry, "name": name}
 
-    def check_surface(self, name: str) -> str:
-        if name not in self.surfaces:
-            known = ", ".join(sorted(self.surfaces))
-            raise MaterialError(f"unknown surface material {brief(name)}; known: {known}")
+    def check_surface(self, name: str, fertilizer: Optional[Fertilizer] = None) -> str:
+        """`name` if the library knows the surface, or `fertilizer` gives values for it."""
+        known = {**dict.fromkeys(self.surfaces), **dict.fromkeys(fertilizer.friction if fertilizer else ())}
+        if name not in known:
+            raise MaterialError(f"unknown surface material {brief(name)}; known: {', '.join(sorted(known))}")
         return name
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Optional
 
-from spreadgym.config.base import brief
 from spreadgym.config.materials import Fertilizer, MaterialLibrary
 from spreadgym.config.scene import Scene
 from spreadgym.errors import MaterialError
@@ -37,12 +36,9 @@ def _pick(override: Optional[float], fertilizer: Fertilizer, quantity: str, surf
 def resolve_contacts(scene: Scene, library: MaterialLibrary) -> Contacts:
     """Look every pair up; a pair the paper did not measure is an error naming it."""
     fertilizer = library.fertilizer_of(scene)
-    known = {**dict.fromkeys(library.surfaces), **dict.fromkeys(fertilizer.friction)}
 
     def surface(name: str) -> str:
-        if name not in known:
-            raise MaterialError(f"unknown surface material {brief(name)}; known: {', '.join(sorted(known))}")
-        return name
+        return library.check_surface(name, fertilizer)
 
     disc, vane = surface(scene.spinner.material), surface(scene.vane_material)
     c = scene.contact
