@@ -202,6 +202,24 @@ class _Pool:
     outcomes: dict = field(default_factory=dict)
 
 
+def scene_runs(scene: Scene, runs: range, model: str, library: MaterialLibrary, tracks: int = 0):
+    """Runs `runs` (consecutive run numbers) of `scene`, in order: side by side (spread.batch:
+    the same bits as one by one), in batches of even size that hold at most
+    MAX_GRANULE_COPIES landing points (64 paper runs: 32 + 32, not 61 + 3, which left a
+    core idle); run 0 keeps `tracks` paths."""
+    per_run = replicate_sizes(scene.sim.granules, scene.sim.replicates).size
+    todo = list(runs)
+    if todo and todo[0] == 0 and tracks:
+        yield run_scene(scene, model=model, library=library, ci=False, tracks=tracks)
+        todo = todo[1:]
+    most = max(1, MAX_GRANULE_COPIES // granule_copies(scene))
+    batches = max(1, math.ceil(len(todo) / most))  # as few as the cap allows, of even size
+    for chunk in np.array_split(np.array(todo, dtype=int), batches):
+        chunk = chunk.tolist()
+        yield from run_batch([scene] * len(chunk), model=model, library=library, ci=False,
+                             first_replicate=[j * per_run for j in chunk])
+
+
 def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, library: Optional[MaterialLibrary],
                tracks: int, progress: Optional[Callable[[int, int], None]],
                pilot_runs: int = PILOT_RUNS) -> tuple[_Pool, Reference]:
@@ -211,7 +229,6 @@ def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, lib
     check_precision(precision_pp)
     library = library or load_library()
     p = scene.pattern
-    per_run = replicate_sizes(scene.sim.granules, scene.sim.replicates).size
     masses = PooledMasses(p.tray_width_m)
     pool = _Pool()
 
@@ -230,20 +247,8 @@ def _pool_runs(scene: Scene, precision_pp: float, max_runs: int, model: str, lib
             progress(pool.runs, max_runs)
 
     def add_runs(count: int) -> Optional[float]:
-        """Runs pool.runs .. + count, side by side (spread.batch: the same bits as one by one),
-        in batches of even size that hold at most MAX_GRANULE_COPIES landing points (64 paper
-        runs: 32 + 32, not 61 + 3, which left a core idle); run 0 keeps `tracks` paths."""
-        todo = list(range(pool.runs, pool.runs + count))
-        if todo[0] == 0 and tracks:
-            add(run_scene(scene, model=model, library=library, ci=False, tracks=tracks))
-            todo = todo[1:]
-        most = max(1, MAX_GRANULE_COPIES // granule_copies(scene))
-        batches = max(1, math.ceil(len(todo) / most))  # as few as the cap allows, of even size
-        for chunk in np.array_split(np.array(todo, dtype=int), batches):
-            chunk = chunk.tolist()
-            for result in run_batch([scene] * len(chunk), model=model, library=library, ci=False,
-                                    first_replicate=[j * per_run for j in chunk]):
-                add(result)
+        for result in scene_runs(scene, range(pool.runs, pool.runs + count), model, library, tracks):
+            add(result)
         return estimate.estimate_cv(masses.masses(), p.tray_width_m, p.target_swath_m, p.driving).standard_error_percent
 
     pool_until_precise(add_runs, precision_pp, max_runs, pilot_runs)

@@ -214,3 +214,143 @@ def precision_markdown(rows: list[dict]) -> str:
             f"{r['stated_se_rms_pp']:.2f} / {r['stated_se_max_pp']:.2f} | {r['stated_over_observed']:.2f} | "
             f"{r['swath_equal_seeds']}/{r['seeds']} | {r['runs_median']:g} | {r['wall_median_s']:.2f} | {mark(met)} |")
     return "\n".join(lines) + "\n"
+
+
+# --- Is the stated standard error honest? -------------------------------------------------
+# simulate's stated standard error against the observed scatter over seeds, on every
+# reference scene. The runs simulate pools are deterministic in (seed, run number), so a
+# seed's runs are made once (`RunStream`) and any stopping rule is replayed on them.
+
+
+class RunStream:
+    """The (R, T) replicate tray masses of runs 0, 1, ... of one scene, made as `simulate`
+    makes them (`precision.scene_runs`) when first asked for, and kept (in `cache`, an .npz
+    file, where given, so a long measurement resumes)."""
+
+    def __init__(self, scene, model: str = "auto", cache: Optional[Path] = None):
+        self.scene = scene
+        self.model = model
+        self.cache = cache
+        self.runs: list[np.ndarray] = []
+        if cache is not None and Path(cache).is_file():
+            with np.load(cache) as stored:
+                self.runs = [stored[f"run{j}"] for j in range(len(stored.files))]
+
+    def masses(self, count: int) -> list[np.ndarray]:
+        """The first `count` runs' replicate tray masses."""
+        if count > len(self.runs):
+            from spreadgym.config.materials import load_library
+            from spreadgym.spread.precision import scene_runs
+
+            made = scene_runs(self.scene, range(len(self.runs), count), self.model, load_library())
+            self.runs += [np.asarray(result.replicate_masses_kg, dtype=float) for result in made]
+            if self.cache is not None:
+                partial = Path(self.cache).with_suffix(".partial.npz")
+                np.savez(partial, **{f"run{j}": m for j, m in enumerate(self.runs)})
+                partial.replace(self.cache)
+        return self.runs[:count]
+
+
+def pooled_estimate(scene, runs: list[np.ndarray]):
+    """The pooled CV at the target width of these runs, as simulate pools them."""
+    from spreadgym.spread import estimate
+    from spreadgym.spread.precision import PooledMasses
+
+    pooled = PooledMasses(scene.pattern.tray_width_m)
+    for masses in runs:
+        pooled.add(masses)
+    p = scene.pattern
+    return estimate.estimate_cv(pooled.masses(), p.tray_width_m, p.target_swath_m, p.driving)
+
+
+def replay_rule(stream: RunStream, precision_pp: float, max_runs: int, rule=None):
+    """(pooled CvEstimate, runs) of a stopping rule (default simulate's,
+    `precision.pool_until_precise`) replayed on a stream's runs."""
+    from spreadgym.spread.precision import pool_until_precise
+
+    rule = rule or pool_until_precise
+    made = [0]
+
+    def add_runs(count: int) -> Optional[float]:
+        made[0] += count
+        return pooled_estimate(stream.scene, stream.masses(made[0])).standard_error_percent
+
+    runs = rule(add_runs, precision_pp, max_runs)
+    return pooled_estimate(stream.scene, stream.masses(runs)), runs
+
+
+def sd_ratio_interval(stated_rms: float, observed_sd: float, samples: int, level: float = 0.95) -> tuple:
+    """Interval for stated / true s.d. from the chi-square law of the observed s.d. over
+    `samples` independent samples (the stated RMS taken as known)."""
+    from scipy.stats import chi2
+
+    dof = samples - 1
+    low, high = chi2.ppf([(1 - level) / 2, (1 + level) / 2], dof)
+    return stated_rms / (observed_sd * np.sqrt(dof / low)), stated_rms / (observed_sd * np.sqrt(dof / high))
+
+
+def honesty_summary(cvs, stated) -> dict:
+    """Observed s.d. of `cvs`, median and RMS of the `stated` standard errors, their ratio
+    (RMS / s.d.: the stated variance against the observed one) and its 95 % interval."""
+    cvs, stated = np.asarray(cvs, dtype=float), np.asarray(stated, dtype=float)
+    observed = float(cvs.std(ddof=1))
+    rms = float(np.sqrt(np.mean(stated**2)))
+    low, high = sd_ratio_interval(rms, observed, cvs.size)
+    return {"samples": int(cvs.size), "stated_median_pp": float(np.median(stated)), "stated_rms_pp": rms,
+            "observed_sd_pp": observed, "observed_low_pp": float(rms / high), "observed_high_pp": float(rms / low),
+            "ratio": rms / observed, "ratio_low": float(low), "ratio_high": float(high)}
+
+
+HONESTY_TARGET = 0.25  # issue 43: stated / observed within 1 +- this on every reference scene
+
+
+def honesty_markdown(rows: list[dict]) -> str:
+    """One line per scene: simulate's rule beside one run, each with its ratio's 95 % interval."""
+    lines = ["| scene | seeds | runs (median) | stated SE, median / RMS (pp) | observed s.d. (pp, 95 % CI) | "
+             "stated / observed (95 % CI) | within ±25 % | one run: stated / observed (95 % CI, runs) |",
+             "|---|---|---|---|---|---|---|---|"]
+    single = {r["scene"]: r for r in rows if r["rule"] == "one run"}
+    for r in rows:
+        if r["rule"] == "one run":
+            continue
+        one = single[r["scene"]]
+        met = abs(r["ratio"] - 1.0) <= HONESTY_TARGET
+        lines.append(
+            f"| {r['scene']}{'' if r['rule'] == 'simulate' else ' (' + r['rule'] + ')'} | {r['samples']} | "
+            f"{r['runs_median']:g} | {r['stated_median_pp']:.3f} / {r['stated_rms_pp']:.3f} | "
+            f"{r['observed_sd_pp']:.3f} ({r['observed_low_pp']:.3f}-{r['observed_high_pp']:.3f}) | "
+            f"{r['ratio']:.2f} ({r['ratio_low']:.2f}-{r['ratio_high']:.2f}) | {mark(met)} | "
+            f"{one['ratio']:.2f} ({one['ratio_low']:.2f}-{one['ratio_high']:.2f}, {one['samples']}) |")
+    return "\n".join(lines) + "\n"
+
+
+def honesty_rows(seeds: int = 32, names: Optional[list[str]] = None, precision_pp: Optional[float] = None,
+                 max_runs: Optional[int] = None, model: str = "auto", cache_dir: Optional[Path] = None,
+                 rules: Optional[dict] = None, first_seed: int = FIRST_TARGET_SEED,
+                 progress: Callable[[str], None] = lambda _: None) -> list[dict]:
+    """Per reference scene (of `names`): simulate's stated standard error against the
+    observed s.d. of its CV over `seeds` seeds (`first_seed`..), for one run (every
+    run made counts as an independent one-run sample) and for each stopping rule of
+    `rules` (name -> rule like `precision.pool_until_precise`; default simulate's)."""
+    from spreadgym.spread.precision import SIMULATE_MAX_RUNS, SIMULATE_PRECISION_PP, pool_until_precise
+
+    precision_pp = SIMULATE_PRECISION_PP if precision_pp is None else precision_pp
+    max_runs = SIMULATE_MAX_RUNS if max_runs is None else max_runs
+    rules = rules or {"simulate": pool_until_precise}
+    family = reference_family()
+    rows = []
+    for name in names or list(family):
+        progress(f"{name}: {seeds} seeds")
+        streams = []
+        for seed in range(seeds):
+            cache = None if cache_dir is None else Path(cache_dir) / f"{name}-{first_seed + seed}.npz"
+            streams.append(RunStream(scene_with(family[name], {"sim.seed": first_seed + seed}), model, cache))
+        for label, rule in rules.items():
+            found = [replay_rule(stream, precision_pp, max_runs, rule) for stream in streams]
+            rows.append({"scene": name, "rule": label, **honesty_summary(
+                [e.cv_percent for e, _ in found], [e.standard_error_percent for e, _ in found]),
+                "runs_median": statistics.median(runs for _, runs in found)})
+        single = [pooled_estimate(stream.scene, [masses]) for stream in streams for masses in stream.runs]
+        rows.append({"scene": name, "rule": "one run", **honesty_summary(
+            [e.cv_percent for e in single], [e.standard_error_percent for e in single]), "runs_median": 1})
+    return rows

@@ -9,6 +9,7 @@ from spreadgym.config.scene import load_scene, scene_with
 from spreadgym.errors import SpreadgymError
 from spreadgym.spread import estimate, precision
 from spreadgym.spread.pipeline import run_scene
+from spreadgym.studies.estimate_bench import HONESTY_TARGET, honesty_summary
 
 GRANULES_PER_RUN = 4000
 REPLICATES_PER_RUN = 8
@@ -45,6 +46,32 @@ def test_intervals_after_the_rule_cover_the_exact_cv(name):
     assert abs(cvs.mean() - exact) < 3 * cvs.std(ddof=1) / np.sqrt(cvs.size)  # unbiased
     assert np.sqrt(np.mean(stated**2)) == pytest.approx(cvs.std(ddof=1), rel=0.25)  # honest
     assert len({runs for _, runs in draws}) > 1  # the count follows the pilot: a real rule, not a constant
+
+
+SCATTER_SEEDS = 200
+SCATTER_GRANULES = 256  # a run of the paper scene in 8 replicates of 32 granules (x 32 release angles)
+SCATTER_PRECISION_PP = 0.6  # about 9 runs pooled, as simulate's default pools on the reference scenes
+
+
+def test_stated_standard_error_matches_the_scatter_of_simulate_over_seeds():
+    """simulate on a real scene (paper, 256 granules a run so that many seeds are cheap):
+    the stated standard error (RMS over seeds) against the observed s.d. of the printed
+    CV over SCATTER_SEEDS seeds. The observed s.d. carries a chi-square law of S - 1
+    degrees of freedom, so the ratio is known within its 95 % interval (about +-10 %
+    here); the issue's target (stated within +-25 % of observed) is met where that whole
+    interval lies within it. The same for each run alone (the jackknife of 8 replicates,
+    no stopping rule; every pooled run is an independent one-run sample)."""
+    scene = scene_with(load_scene("paper"), {"sim.granules": SCATTER_GRANULES})
+    results = [precision.simulate_precisely(scene_with(scene, {"sim.seed": seed}), SCATTER_PRECISION_PP)
+               for seed in range(SCATTER_SEEDS)]
+    p = scene.pattern
+    replicates = scene.sim.replicates
+    single = [estimate.estimate_cv(r.masses[j:j + replicates], p.tray_width_m, p.target_swath_m, p.driving)
+              for r in results for j in range(0, r.masses.shape[0], replicates)]
+    for name, estimates in (("simulate", [r.at_target for r in results]), ("one run", single)):
+        found = honesty_summary([e.cv_percent for e in estimates], [e.standard_error_percent for e in estimates])
+        assert 1 - HONESTY_TARGET <= found["ratio_low"] and found["ratio_high"] <= 1 + HONESTY_TARGET, (name, found)
+    assert len({r.runs for r in results}) > 1  # the rule chose the counts
 
 
 def test_runs_needed_follows_the_inverse_square_law_within_the_cap():
