@@ -1,6 +1,6 @@
 """How good is one run's CV? Bias and spread against converged references (`make bench`).
 
-Two benchmarks:
+Four benchmarks:
 * `cv_noise_rows`: on one scene and model, the CV of single runs against the converged
   CV of the same model, for plain Monte Carlo, the QMC sampler, and the QMC sampler with
   release-angle copies (the default), each scored by the plain tray CV and by the
@@ -8,6 +8,10 @@ Two benchmarks:
 * `target_rows`: the default evaluation (default granule count and sampler) on every
   reference scene against its stored converged reference: the estimate's bias, its
   spread over seeds, how often the effective swath equals the converged one, the wall time.
+* `precision_rows`: simulate's default (runs pooled to a precision) against the
+  converged full model: bias, scatter, stated error, swath, runs and wall time.
+* `honesty_rows`: simulate's stated standard error against the observed scatter of its
+  CV over many seeds on every reference scene, for its stopping rule and for one run alone.
 """
 
 from __future__ import annotations
