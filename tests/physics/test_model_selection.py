@@ -15,6 +15,9 @@ def test_auto_picks_compiled_inside_the_validated_envelope_and_pymunk_outside():
     assert model == "pymunk" and "rpm 1500 outside [200, 1100]" in reason
     model, reason = choose_model(load_scene("paper", {"feed.drop_height_m": 0.2}))
     assert model == "pymunk" and "drop_height_m 0.2 outside" in reason
+    assert choose_model(load_scene("paper", {"fertilizer": "potassium-chloride"}))[0] == "compiled"  # mu_r 0.31
+    model, reason = choose_model(load_scene("paper", {"contact.rolling_resistance": 0.6}))
+    assert model == "pymunk" and "rolling_resistance 0.6 outside [0, 0.31]" in reason
     model, reason = choose_model(load_scene("paper"), "pymunk")
     assert (model, reason) == ("pymunk", "requested")
     with pytest.raises(ConfigError, match="model: unknown model 'dem'"):
