@@ -20,7 +20,7 @@ from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Scene, bout_trays, check_pooled_work, load_scene, scene_from_dict, scene_with
 from spreadgym.config.settings import SettingsSpace
 from spreadgym.errors import ConfigError, MaterialError, SpreadgymError
-from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.physics.contacts import runnable
 from spreadgym.physics.selection import MODELS
 from spreadgym.spread.pipeline import run_scene
 
@@ -192,7 +192,7 @@ def resolve_fertilizers(text_or_names, scene: Scene, library: MaterialLibrary) -
         chosen = []
         for name in library.fertilizers:
             try:
-                resolve_contacts(scene_with(scene, {"fertilizer": name}), library)
+                runnable(scene_with(scene, {"fertilizer": name}), library)
                 chosen.append(name)
             except MaterialError as exc:
                 notes.append(f"{name} left out: {exc}")
@@ -204,7 +204,7 @@ def resolve_fertilizers(text_or_names, scene: Scene, library: MaterialLibrary) -
             known = ", ".join(library.fertilizers)
             raise SpreadgymError(f"--fertilizers: unknown fertilizer {brief(name)}; known: {known} (or all alone)")
         try:
-            resolve_contacts(scene_with(scene, {"fertilizer": name}), library)
+            runnable(scene_with(scene, {"fertilizer": name}), library)
         except MaterialError as exc:
             raise SpreadgymError(f"--fertilizers {name}: {exc}") from None
     return tuple(dict.fromkeys(names)), notes

@@ -62,3 +62,10 @@ def resolve_contacts(scene: Scene, library: MaterialLibrary) -> Contacts:
         vane_rolling_resistance=_pick(c.rolling_resistance, fertilizer, "rolling_resistance", vane),
         deflectors=plates,
     )
+
+
+def runnable(scene: Scene, library: MaterialLibrary) -> Contacts:
+    """The scene's contacts if its fertilizer can run on it (its density and size known and
+    every pair the scene needs measured or set), else a MaterialError naming what is missing."""
+    library.fertilizer_of(scene).granule_properties()
+    return resolve_contacts(scene, library)
