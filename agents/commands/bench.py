@@ -16,7 +16,7 @@ from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
             "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "honesty", "env-noise",
-            "chart-quality", "fit", "batch", "validation")
+            "chart-quality", "fit", "batch", "validation", "server")
 """Every section, in the order `make bench` runs them (`section_runners` gives each its work)."""
 
 
@@ -78,6 +78,7 @@ def section_runners(args: argparse.Namespace, say) -> dict:
                                                 progress=say),
         "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
         "validation": lambda: validation.write_validation(args.out, say),
+        "server": lambda: server_rows(args.repeats),
     }
 
 
@@ -115,6 +116,16 @@ def run_section(args: argparse.Namespace, name: str, say) -> None:
     print(f"[{name}]")
     print(format_table([list(r.values()) for r in rows], list(rows[0])))
     print()
+
+
+def server_rows(repeats: int) -> list[dict]:
+    """`spreadgym serve` under load, measured from outside (agents.web.stress), on an empty charts folder."""
+    import tempfile
+
+    from spreadgym.agents.web.stress import server_rows as measured
+
+    with tempfile.TemporaryDirectory() as charts:
+        return measured(Path(charts), repeats)
 
 
 def reference_rows(references, out: Path, say) -> list[dict]:
