@@ -39,6 +39,8 @@ def _listening_sockets(root: int) -> list[tuple[str, int, str, bool]]:
     import ipaddress
     import os
 
+    from spreadgym.agents.web.stress import tree
+
     listening = {}
     for table, width in (("tcp", 4), ("tcp6", 16)):
         try:
@@ -56,19 +58,8 @@ def _listening_sockets(root: int) -> list[tuple[str, int, str, bool]]:
             ip = ipaddress.ip_address(raw)
             mapped = getattr(ip, "ipv4_mapped", None)
             listening[int(fields[9])] = (str(ip), int(port, 16), ip.is_loopback or bool(mapped and mapped.is_loopback))
-    children: dict[int, list[int]] = {}
-    for name in os.listdir("/proc"):
-        if name.isdigit():
-            try:
-                with open(f"/proc/{name}/stat", encoding="ascii", errors="replace") as handle:
-                    parent = int(handle.read().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(parent, []).append(int(name))
-    found, todo = [], [root]
-    while todo:
-        pid = todo.pop()
-        todo += children.get(pid, [])
+    found = []
+    for pid in tree(root):
         try:
             links = []
             for fd in os.listdir(f"/proc/{pid}/fd"):
