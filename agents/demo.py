@@ -242,6 +242,9 @@ def table_rows(columns: list[Column], target_m: float) -> list[tuple]:
     return rows
 
 
+OUTPUTS = ("before_after.csv", "before_after.md", "before_after.json", "before_after.png")
+
+
 def write_demo(out: Path, columns: list[Column], target_m: float, budget: int, granules: int, wall: float) -> list:
     from spreadgym.viz.plots import write_simulation_plots  # matplotlib: only when writing pictures
 

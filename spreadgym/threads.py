@@ -21,6 +21,7 @@ from typing import Callable, Iterator, Optional, TypeVar
 from spreadgym.errors import ConfigError
 
 ENV_VAR = "SPREADGYM_THREADS"
+MAX_THREADS = 4096  # far above any machine's cores: more only costs memory and start-up
 T = TypeVar("T")
 _chosen: Optional[int] = None
 _LAUNCH = threading.Lock()
@@ -98,6 +99,8 @@ def _checked(value, name: str) -> int:
         count = 0
     if isinstance(value, bool) or count < 1 or str(count) != str(value).strip():
         raise ConfigError(name, f"expected a whole number of threads >= 1, got {value!r}")
+    if count > MAX_THREADS:
+        raise ConfigError(name, f"{count} threads is out of range; allowed: 1 to {MAX_THREADS}")
     return count
 
 

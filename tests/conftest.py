@@ -30,3 +30,56 @@ def _default_thread_count():
     from spreadgym.threads import set_threads
 
     set_threads(None)
+
+
+def _listening_sockets(root: int) -> list[tuple[str, int, str, bool]]:
+    """(address, port, process name, loopback) of every listening TCP socket held by
+    process `root` or its descendants, read from /proc (net/tcp and tcp6 for the sockets
+    in LISTEN state, each process's fd links for whose they are)."""
+    import ipaddress
+    import os
+
+    from spreadgym.agents.web.stress import tree
+
+    listening = {}
+    for table, width in (("tcp", 4), ("tcp6", 16)):
+        try:
+            with open(f"/proc/net/{table}", encoding="ascii") as handle:
+                lines = handle.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            if fields[3] != "0A":  # TCP_LISTEN
+                continue
+            address, port = fields[1].split(":")
+            raw = bytes.fromhex(address)
+            raw = b"".join(raw[i:i + 4][::-1] for i in range(0, width, 4))  # host-order words
+            ip = ipaddress.ip_address(raw)
+            mapped = getattr(ip, "ipv4_mapped", None)
+            listening[int(fields[9])] = (str(ip), int(port, 16), ip.is_loopback or bool(mapped and mapped.is_loopback))
+    found = []
+    for pid in tree(root):
+        try:
+            links = []
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                try:
+                    links.append(os.readlink(f"/proc/{pid}/fd/{fd}"))
+                except OSError:  # closed meanwhile
+                    pass
+            with open(f"/proc/{pid}/comm", encoding="utf-8") as handle:
+                comm = handle.read().strip()
+        except OSError:
+            continue
+        for link in links:
+            if link.startswith("socket:[") and int(link[8:-1]) in listening:
+                address, port, loopback = listening[int(link[8:-1])]
+                found.append((address, port, comm, loopback))
+    return found
+
+
+@pytest.fixture
+def listening_sockets():
+    """The listening sockets of a process tree: `listening_sockets(pid)` -> [(address, port, name)]."""
+    return _listening_sockets
+

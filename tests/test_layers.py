@@ -16,7 +16,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 LAYERS = (  # lowest first; errors, report, threads and heap are plain helpers every layer may use
     ("spreadgym.errors", "spreadgym.report", "spreadgym.threads", "spreadgym.heap"),
-    ("spreadgym.config",),
+    ("spreadgym.config", "spreadgym.out_folder"),  # out_folder: the --out rule of every command
     ("spreadgym.physics",),
     ("spreadgym.spread",),
     ("spreadgym.viz",),

@@ -15,7 +15,8 @@ from typing import Optional
 import numpy as np
 
 from spreadgym.agents.chart.spec import Cell, ChartSpec
-from spreadgym.agents.chart.store import CHART_FILES, HEAD, TAIL, ChartStore, json_text, write_atomic
+from spreadgym.agents.chart.store import CHART_FILES, HEAD, TAIL, ChartStore, json_text
+from spreadgym.out_folder import write_atomic
 
 
 def columns(rows: list[dict]) -> list[str]:

@@ -4,6 +4,8 @@ joined by address), or one after the other in this process.
 The embedded Ray is private: without an address a new local instance is started
 (`address="local"`), never a cluster named by RAY_ADDRESS or one already running on the
 machine, with an object store sized to the chart's results; a failed start is one line.
+Every service it starts listens on 127.0.0.1 only (dashboard off), and its session
+folder (logs, sockets) lies in a per-user cache, removed when the chart ends.
 Everything that can be checked before the work is (the folder, the files to come, the
 address, Ray's start), and a refused run leaves the folder as it was.
 
@@ -22,12 +24,15 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import socket
 import sys
+import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import Callable, Iterator, Optional, Sequence
 
 from spreadgym.agents.chart import outputs, sweep
 from spreadgym.agents.chart.search import run_cell, score_candidates
@@ -41,6 +46,9 @@ ADDRESS_TIMEOUT_S = 3.0
 WAIT_S = 0.5
 OBJECT_STORE_BASE_BYTES = 80 * 2**20  # Ray's least (75 MiB) and some room
 OBJECT_STORE_PER_WORKER_BYTES = 16 * 2**20  # a cell's record and picture are under 1 MiB; a few wait per worker
+LOOPBACK = "127.0.0.1"
+LOOPBACK_SWITCH = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"  # Ray's own switch (ray._private.ray_constants)
+SESSION_ROOT_CHARS = 45  # a session folder and socket name add 62 characters; a socket path holds 107 at most
 
 
 @dataclass
@@ -89,12 +97,74 @@ def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
         return True
     cpus = workers or os.cpu_count() or 1
     try:
-        ray.init(address="local", num_cpus=cpus, include_dashboard=False,
-                 object_store_memory=OBJECT_STORE_BASE_BYTES + OBJECT_STORE_PER_WORKER_BYTES * cpus, **quiet)
+        with loopback_only():
+            ray.init(address="local", num_cpus=cpus, include_dashboard=False, _node_ip_address=LOOPBACK,
+                     _temp_dir=str(session_root()),
+                     object_store_memory=OBJECT_STORE_BASE_BYTES + OBJECT_STORE_PER_WORKER_BYTES * cpus, **quiet)
     except Exception as exc:  # whatever stops Ray's processes, the user gets one line
         ray.shutdown()
         raise SpreadgymError(f"the embedded Ray ({cpus} CPUs) did not start: {_first_line(exc)}") from None
     return True
+
+
+@contextmanager
+def loopback_only() -> Iterator[None]:
+    """While an embedded Ray starts: every service it starts (GCS, raylet, workers, agents)
+    binds 127.0.0.1 only. Ray does so where its node address is the loopback one, which it
+    keeps only where "clusters" are off (its default on macOS and Windows, the switch
+    RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 elsewhere); the switch is read by Ray when imported
+    and by the processes it starts (they inherit the environment), so both are set here
+    and put back after the start (joining a cluster later in this process is untouched).
+    The test lists the listening sockets of the chart's processes (tests/agents/test_chart_ray.py)."""
+    from ray._private import ray_constants
+
+    saved_env, saved_flag = os.environ.get(LOOPBACK_SWITCH), ray_constants.ENABLE_RAY_CLUSTER
+    os.environ[LOOPBACK_SWITCH] = "0"
+    ray_constants.ENABLE_RAY_CLUSTER = False
+    try:
+        yield
+    finally:
+        ray_constants.ENABLE_RAY_CLUSTER = saved_flag
+        if saved_env is None:
+            os.environ.pop(LOOPBACK_SWITCH, None)
+        else:
+            os.environ[LOOPBACK_SWITCH] = saved_env
+
+
+def session_root() -> Path:
+    """Where the embedded Ray keeps its session folders (logs, sockets): a per-user cache
+    ($XDG_CACHE_HOME or ~/.cache, spreadgym/ray), never the shared system temp folder.
+    Ray's Unix sockets need a short path (108 bytes with the session's own 60), so a
+    cache path longer than SESSION_ROOT_CHARS falls back to a folder of this user's own
+    (mode 700) under the system temp folder."""
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "spreadgym" / "ray"
+    if len(str(cache.absolute())) <= SESSION_ROOT_CHARS:
+        try:
+            cache.mkdir(parents=True, exist_ok=True, mode=0o700)
+            return cache.absolute()
+        except OSError:
+            pass
+    private = Path(tempfile.gettempdir()) / f"spreadgym-ray-{os.getuid()}"
+    private.mkdir(mode=0o700, exist_ok=True)
+    if private.is_symlink() or private.stat().st_uid != os.getuid():
+        raise SpreadgymError(f"the embedded Ray's folder {private} is not this user's own; remove it")
+    return private
+
+
+def end_session() -> None:
+    """Stop the embedded Ray and remove its session folder (its logs and sockets)."""
+    import ray
+
+    try:
+        session = Path(ray._private.worker._global_node.get_session_dir_path())
+    except Exception:  # no node, or a Ray without the call: nothing of ours to remove
+        session = None
+    ray.shutdown()
+    if session is not None and session.parent == session_root():
+        shutil.rmtree(session, ignore_errors=True)
+        latest = session.parent / "session_latest"
+        if latest.is_symlink() and not latest.exists():
+            latest.unlink(missing_ok=True)
 
 
 def _first_line(exc: BaseException) -> str:
@@ -136,12 +206,15 @@ def _run_ray(spec: ChartSpec, todo: Sequence[Cell], records: dict,
 
 def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional[int] = None,
               address: Optional[str] = None, notes: Sequence[str] = (), progress: bool = True,
-              on_cell: Optional[Callable[[Cell, dict], None]] = None) -> ChartResult:
+              on_cell: Optional[Callable[[Cell, dict], None]] = None, force: bool = False,
+              inputs: Sequence[Path] = ()) -> ChartResult:
     """Run (or resume) the chart of `spec` in folder `out` and write its files.
 
     engine "ray": cells are Ray tasks (local Ray with `workers` CPUs, default all, or
     the cluster at `address`); "local": one after the other in this process.
-    `on_cell(cell, record)` is called after each finished cell is written.
+    `on_cell(cell, record)` is called after each finished cell is written. `force`: write
+    into a folder holding another command's outputs; `inputs`: files the chart reads
+    (never written over).
     """
     if engine not in ENGINES:
         raise SpreadgymError(f"engine {brief(engine)}; allowed: {', '.join(ENGINES)}")
@@ -157,7 +230,7 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
         check_address(address)  # before the folder is claimed
     started = time.perf_counter()
     store = ChartStore(out, spec)
-    store.probe()
+    store.probe(force, inputs)
     store.check_manifest()
     records, replaced = store.finished()
     reused = list(records)
@@ -165,19 +238,18 @@ def run_chart(spec: ChartSpec, out: Path, engine: str = "ray", workers: Optional
     computed: list[str] = []
     started_here = bool(todo) and engine == "ray" and connect_ray(workers, address)
     try:
-        store.open()  # the first write: every refusal came before it
-        _run_cells(spec, store, todo, engine, records, computed, progress, on_cell)
-        sweep_rows(spec, store, records, remote=engine == "ray")
-        ordered = [records[c.key] for c in spec.cells]
-        for cell, record in zip(spec.cells, ordered):
-            if not store.picture_ok(cell):  # interrupted before its picture, or the picture damaged
-                outputs.cell_figure(store, cell, record)
-        files, payload = outputs.write_chart(store, ordered, list(notes))
+        with store.folder(force, inputs).writing():
+            store.open()  # the first write: every refusal came before it
+            _run_cells(spec, store, todo, engine, records, computed, progress, on_cell)
+            sweep_rows(spec, store, records, remote=engine == "ray")
+            ordered = [records[c.key] for c in spec.cells]
+            for cell, record in zip(spec.cells, ordered):
+                if not store.picture_ok(cell):  # interrupted before its picture, or the picture damaged
+                    outputs.cell_figure(store, cell, record)
+            files, payload = outputs.write_chart(store, ordered, list(notes))
     finally:
         if started_here:
-            import ray
-
-            ray.shutdown()
+            end_session()
     return ChartResult(spec, payload, files, computed, reused, replaced, time.perf_counter() - started)
 
 
@@ -301,12 +373,15 @@ def _run_cells(spec: ChartSpec, store: ChartStore, todo: Sequence[Cell], engine:
 def chart(scene: str, fertilizers, widths, out: Path, driving: Optional[str] = None, budget: int = 200,
           granules: Optional[int] = None, seed: int = 0, workers: Optional[int] = None,
           address: Optional[str] = None, engine: str = "ray", progress: bool = True,
-          on_cell: Optional[Callable[[Cell, dict], None]] = None, **spec_options) -> ChartResult:
+          on_cell: Optional[Callable[[Cell, dict], None]] = None, force: bool = False,
+          **spec_options) -> ChartResult:
     """The spreading chart of `scene` for `fertilizers` (names, a comma list or "all") at
     `widths` (metres, "W1,W2" or "LO:HI:STEP"), in folder `out`: what `spreadgym chart`
     runs. `spec_options` go to `make_spec` (search_model, verify_model, verify_runs,
     settings ranges)."""
     spec, notes = make_spec(scene, fertilizers, widths, driving=driving, budget=budget, granules=granules,
                             seed=seed, **spec_options)
+    inputs = [Path(p) for p in (scene, spec_options.get("variability"), spec_options.get("policy"))
+              if p and Path(p).exists()]
     return run_chart(spec, out, engine=engine, workers=workers, address=address, notes=notes,
-                     progress=progress, on_cell=on_cell)
+                     progress=progress, on_cell=on_cell, force=force, inputs=inputs)

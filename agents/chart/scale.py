@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Callable, Optional
 
-from spreadgym.agents.chart.runner import connect_ray, run_chart
+from spreadgym.agents.chart.runner import connect_ray, end_session, run_chart
 from spreadgym.agents.chart.spec import make_spec
 
 SCALE_CHART = dict(scene="paper", fertilizers="all", widths="3:6:0.5", budget=48, granules=2048, verify_runs=2,
@@ -26,10 +26,8 @@ SCALE_CHART = dict(scene="paper", fertilizers="all", widths="3:6:0.5", budget=48
 
 
 def _local(workers: int):
-    import ray
-
     connect_ray(workers, None)
-    return ray.shutdown
+    return end_session
 
 
 def _three_nodes():

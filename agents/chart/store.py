@@ -2,7 +2,7 @@
 
 DIR/manifest.json holds the `ChartSpec` (scene, fertilizers, widths, driving, budget,
 granules, seed, models); DIR/cells/<key>.json holds one finished cell. Every file is
-written whole or not at all (a temporary file renamed over the target), so an
+written whole or not at all (`spreadgym.out_folder.write_atomic`), so an
 interrupted chart leaves only finished cells. A folder whose manifest differs from the
 spec being run is refused, naming what changed, rather than mixing two charts.
 
@@ -10,22 +10,23 @@ A cell file is reused only when it is the record of its cell (`record_problem`: 
 schema, the cell's fertilizer, width and driving, finite values in their ranges, the
 settings matching their unit vector); any other file there is recomputed and replaced.
 Before any work, `probe` refuses a folder where a file due after the work could not be
-written, so no computed cell is lost to a folder that cannot take it.
+written, so no computed cell is lost to a folder that cannot take it, and one that
+holds another command's outputs (the output-folder rule of every command,
+`spreadgym.out_folder`; the manifest marks a chart folder written before stamps).
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 from spreadgym.agents.chart.spec import MANIFEST_DEFAULTS, Cell, ChartSpec
 from spreadgym.agents.chart.sweep import points_of
 from spreadgym.config.base import brief
 from spreadgym.errors import SpreadgymError
+from spreadgym.out_folder import OutFolder, folder_problem, write_atomic
 from spreadgym.report import print_json
 
 MANIFEST = "manifest.json"
@@ -38,25 +39,6 @@ DETAIL = {"key", "unit_settings", "search_unit_settings", "objective", "method",
           "search_evaluations", "rescores", "ties", "tie_set", "sweep", "search_agrees_within_2se", "meets_threshold",
           "verification", "verification_p90", "trays", "cv_curve"}
 PNG_START, PNG_END = b"\x89PNG\r\n\x1a\n", b"IEND\xaeB`\x82"
-
-
-def partial_path(path: Path) -> Path:
-    """Where `write_atomic` writes `path` before renaming it."""
-    return path.with_name(f".{path.name}.partial")
-
-
-def write_atomic(path: Path, content: str | bytes) -> Path:
-    """Write `content` (text as UTF-8, or bytes) to `path` whole: a temporary file beside
-    it, renamed over it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = partial_path(path)
-    data = content.encode("utf-8") if isinstance(content, str) else content
-    with open(partial, "wb") as handle:
-        handle.write(data)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(partial, path)
-    return path
 
 
 def json_text(payload) -> str:
@@ -98,27 +80,24 @@ class ChartStore:
     def cell_path(self, cell: Cell, suffix: str = ".json") -> Path:
         return self.cells_dir / f"{cell.key}{suffix}"
 
-    def probe(self) -> None:
-        """Refuse, writing nothing, a folder where a file of the chart could not be written:
-        the folders (or the nearest one that exists) must take a file, and no file of the
-        chart may be a folder."""
-        existing = next(p for p in (self.out, *self.out.parents) if p.exists() or p == p.parent)
-        for folder in dict.fromkeys((self.cells_dir, existing) if self.cells_dir.exists() else (existing,)):
-            if not folder.is_dir():
-                raise SpreadgymError(f"--out {self.out}: {folder} is a file, not a folder")
-            try:
-                with tempfile.TemporaryFile(dir=folder):
-                    pass
-            except OSError as exc:
-                raise SpreadgymError(f"--out {self.out}: cannot write in {folder} "
-                                     f"({exc.strerror or type(exc).__name__})") from None
-        files = [self.out / MANIFEST, *(self.out / name for name in CHART_FILES)]
-        files += [self.cell_path(cell, suffix) for cell in self.spec.cells for suffix in (".json", ".png")]
-        for path in files:
-            for target in (path, partial_path(path)):
-                if target.is_dir():
-                    raise SpreadgymError(f"--out {self.out}: {target} is a folder where the chart writes a file; "
-                                         "remove it or use another --out")
+    def folder(self, force: bool = False, inputs: Sequence[Path] = ()) -> OutFolder:
+        """The chart folder as an output folder (`spreadgym.out_folder`): the chart's files
+        and every cell's record and picture, resumed (kept when interrupted)."""
+        files = [MANIFEST, *CHART_FILES,
+                 *(f"{CELLS}/{cell.key}{suffix}" for cell in self.spec.cells for suffix in (".json", ".png"))]
+        return OutFolder(self.out, "chart", files, inputs, force, replaces_own=True, keeps_partial=True,
+                         marker=MANIFEST)
+
+    def probe(self, force: bool = False, inputs: Sequence[Path] = ()) -> None:
+        """Refuse, writing nothing, a folder where a file of the chart could not be written
+        (the folders, or the nearest one that exists, must take a file, and no file of the
+        chart may be a folder), that holds another command's outputs (unless `force`), or
+        where an input would be written over."""
+        self.folder(force, inputs).check()
+        if self.cells_dir.exists():
+            problem = folder_problem(self.cells_dir)
+            if problem:
+                raise SpreadgymError(f"--out {self.out}: {CELLS} {problem}")
 
     def check_manifest(self) -> None:
         """Refuse, writing nothing, a folder that holds another chart (or cells without a manifest)."""

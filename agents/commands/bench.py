@@ -16,14 +16,16 @@ from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
             "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "honesty", "env-noise",
-            "chart-quality", "fit", "batch", "validation")
+            "chart-quality", "fit", "batch", "validation", "server")
 """Every section, in the order `make bench` runs them (`section_runners` gives each its work)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only", choices=SECTIONS, action="append", help="run only these sections")
     parser.add_argument("--out", type=arguments.output_folder, default=Path("docs/bench"),
-                        help="output folder (default docs/bench)")
+                        help="output folder (default docs/bench; the bench's earlier outputs are replaced, "
+                             "section by section)")
+    arguments.force_flag(parser)
     parser.add_argument("--repeats", type=arguments.COUNT, default=3, help="repeats per timing (median is reported)")
 
 
@@ -76,13 +78,13 @@ def section_runners(args: argparse.Namespace, say) -> dict:
                                                 progress=say),
         "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
         "validation": lambda: validation.write_validation(args.out, say),
+        "server": lambda: server_rows(args.repeats),
     }
 
 
 def run(args: argparse.Namespace) -> int:
-    from spreadgym.agents.chart import scale
     from spreadgym.errors import SpreadgymError
-    from spreadgym.studies import estimate_bench, speed_accuracy
+    from spreadgym.out_folder import OutFolder
 
     if args.repeats < 1:
         raise SpreadgymError(f"--repeats: {args.repeats} must be at least 1")
@@ -92,18 +94,38 @@ def run(args: argparse.Namespace) -> int:
         print(text, file=sys.stderr)
 
     sections = args.only or list(SECTIONS)
-    runners = section_runners(args, say)
+    out = OutFolder(args.out, "bench", force=args.force, keeps_partial=True)
+    out.check()
+    with out.writing():  # each section's files as it finishes: an interrupted bench keeps the finished ones
+        for name in sections:
+            run_section(args, name, say)
+    return 0
+
+
+def run_section(args: argparse.Namespace, name: str, say) -> None:
+    """One section: its rows computed, written (CSV, and a picture where it has one) and printed."""
+    from spreadgym.agents.chart import scale
+    from spreadgym.studies import estimate_bench, speed_accuracy
+
     plots = {"cv-noise": estimate_bench.plot_cv_noise, "speed-accuracy": speed_accuracy.plot_speed_accuracy,
              "chart-scale": scale.plot_chart_scale}
-    for name in sections:
-        rows = runners[name]()
-        write_csv(rows, args.out / f"{name}.csv")
-        if name in plots:
-            plots[name](rows, args.out / f"{name}.png")
-        print(f"[{name}]")
-        print(format_table([list(r.values()) for r in rows], list(rows[0])))
-        print()
-    return 0
+    rows = section_runners(args, say)[name]()
+    write_csv(rows, args.out / f"{name}.csv")
+    if name in plots:
+        plots[name](rows, args.out / f"{name}.png")
+    print(f"[{name}]")
+    print(format_table([list(r.values()) for r in rows], list(rows[0])))
+    print()
+
+
+def server_rows(repeats: int) -> list[dict]:
+    """`spreadgym serve` under load, measured from outside (agents.web.stress), on an empty charts folder."""
+    import tempfile
+
+    from spreadgym.agents.web.stress import server_rows as measured
+
+    with tempfile.TemporaryDirectory() as charts:
+        return measured(Path(charts), repeats)
 
 
 def reference_rows(references, out: Path, say) -> list[dict]:

@@ -62,6 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "standard errors of it plus X percentage points of the objective; a wider tie set "
                              "lets the row sweep remove reversals at a price in CV (docs/charts.md; default 0: "
                              "the two-standard-error rule)")
+    arguments.force_flag(parser)
     parser.add_argument("--json", action="store_true", help="print chart.json on stdout")
 
 
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving, budget=args.budget,
                    granules=args.granules, seed=args.seed, workers=args.workers, address=args.address,
                    method=args.method, objective=args.objective, policy=args.policy, variability=args.variability,
-                   verify_model=args.verify_model, steady_tolerance_pp=args.steady_tolerance_pp)
+                   verify_model=args.verify_model, steady_tolerance_pp=args.steady_tolerance_pp, force=args.force)
     for key, problem in result.replaced.items():
         print(f"cells/{key}.json was not its cell's record ({problem}): computed again", file=sys.stderr)
     if args.json:

@@ -33,12 +33,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=arguments.SEED, default=0, help="seed of the searches (default 0)")
     parser.add_argument("--workers", type=arguments.COUNT, default=1, metavar="N",
                         help="processes for the searches (default 1; wall times are per core either way)")
-    parser.add_argument("--threads", type=arguments.integer(1, 4096), metavar="N",
+    parser.add_argument("--threads", type=arguments.THREADS, metavar="N",
                         help="threads in all, shared by the --workers (default: SPREADGYM_THREADS, else every core "
                              "this process may use); each search evaluates its batches on its share")
     parser.add_argument("--json", action="store_true", help="print the table and rows as JSON")
     parser.add_argument("--out", type=arguments.output_folder, default=Path("out/compare"), metavar="DIR",
-                        help="folder for compare.csv/.md/.json and compare.png (default out/compare)")
+                        help="folder for compare.csv/.md/.json and compare.png (default out/compare; a comparison's "
+                             "earlier outputs are replaced)")
+    arguments.force_flag(parser)
 
 
 _ENVS: dict = {}
@@ -76,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         raise SpreadgymError(f"--budget must be at least 1 simulation, got {args.budget}")
     if args.episodes < 1:
         raise SpreadgymError(f"--episodes must be at least 1, got {args.episodes}")
+    out_folder(args).check()
     if args.workers < 1:
         raise SpreadgymError(f"--workers must be at least 1, got {args.workers}")
     started = time.perf_counter()
@@ -134,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
         summaries.append(s)
     ev.mark_ties(summaries)
     elapsed = time.perf_counter() - started
-    written = write_outputs(args.out, summaries, rows, order, titles, args, env_kwargs, elapsed)
+    with out_folder(args).writing() as folder:
+        written = write_outputs(folder, summaries, rows, order, titles, args, env_kwargs, elapsed)
     payload = {"budget": args.budget, "episodes": args.episodes, "env": env_id, "env_kwargs": env_kwargs,
                "jobs": [c.as_dict() for c in jobs], "table": summaries,
                "rows": [r.as_dict() for m in order for r in rows[m]], "elapsed_s": elapsed,
@@ -181,6 +185,17 @@ def _load_policies(paths) -> list:
             key, title = f"{policy.algo}:{run_name}", f"{policy.algo.upper()} policy ({run_name})"
         result.append((key, policy, title))
     return result
+
+
+OUTPUTS = ("compare.csv", "compare_rows.csv", "compare.md", "compare.json", "compare.png")
+
+
+def out_folder(args: argparse.Namespace):
+    """--out as an output folder (`spreadgym.out_folder`): the policies read are its inputs."""
+    from spreadgym.out_folder import OutFolder, named_files
+
+    return OutFolder(args.out, "compare", OUTPUTS, named_files(*(args.model or [])), args.force,
+                     marker="compare.json")
 
 
 def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, elapsed) -> list:

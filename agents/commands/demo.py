@@ -14,7 +14,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents import demo
 
     parser.add_argument("--out", type=arguments.output_folder, default=Path("out/demo"),
-                        help="folder for tables and pictures (default out/demo)")
+                        help="folder for tables and pictures (default out/demo; a demo's earlier outputs are "
+                             "replaced)")
+    arguments.force_flag(parser)
     parser.add_argument("--target-swath", type=arguments.real(0.0, 100.0, low_open=True),
                         default=demo.DEFAULT_TARGET_M, metavar="M",
                         help=f"target swath in m, on the 0.5 m tray grid (default {demo.DEFAULT_TARGET_M:g})")
@@ -36,13 +38,16 @@ def run(args: argparse.Namespace) -> int:
     from contextlib import redirect_stdout
 
     from spreadgym.agents import demo
+    from spreadgym.out_folder import OutFolder, named_files
     from spreadgym.report import print_json
 
     started = time.perf_counter()
     policy = None if args.no_policy else (args.policy or demo.POLICY_PATH)
+    out = OutFolder(args.out, "demo", demo.OUTPUTS, named_files(args.policy), args.force, marker=demo.OUTPUTS[2])
+    out.check()
     buffer = io.StringIO()
-    with redirect_stdout(buffer) if args.json else _nothing():
-        result = demo.run_demo(args.out, target_m=args.target_swath, budget=args.budget, granules=args.granules,
+    with redirect_stdout(buffer) if args.json else _nothing(), out.writing() as folder:  # removed if it fails
+        result = demo.run_demo(folder, target_m=args.target_swath, budget=args.budget, granules=args.granules,
                                seed=args.seed, policy_path=policy, policy_required=args.policy is not None)
     if args.json:
         print_json(result)

@@ -24,7 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="target swaths (default 2 3 4 5)")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON")
     parser.add_argument("--out", type=arguments.output_folder, metavar="DIR2",
-                        help="folder for the table and plots (default: DIR/eval)")
+                        help="folder for the table and plots (default: DIR/eval; an evaluation's earlier outputs "
+                             "are replaced)")
+    arguments.force_flag(parser)
     parser.add_argument("--no-plots", action="store_true", help="skip the pattern plots")
 
 
@@ -34,11 +36,15 @@ def run(args: argparse.Namespace) -> int:
     from spreadgym.agents import evaluation as ev
     from spreadgym.agents.training import load_policy
     from spreadgym.errors import SpreadgymError
+    from spreadgym.out_folder import OutFolder, named_files
     from spreadgym.report import print_json
 
     if args.episodes < 1:
         raise SpreadgymError(f"--episodes must be at least 1, got {args.episodes}")
     policy = load_policy(args.model)
+    out = OutFolder(args.out or policy.path.parent / "eval", "evaluate", OUTPUTS, named_files(args.model), args.force,
+                    marker="eval.json")
+    out.check()
     env_kwargs = evaluation_env_kwargs(policy.env_kwargs, args.granules)
     env = ev.make_env(policy.env_id, env_kwargs)
     jobs = ev.evaluation_set(args.fertilizers, args.swaths)
@@ -52,8 +58,8 @@ def run(args: argparse.Namespace) -> int:
                 rows.append(ev.run_policy(env, ctx, policy.act, method, episode))
                 bar.update()
     summary = ev.summarise(method, rows)
-    out = args.out or policy.path.parent / "eval"
-    written = write_outputs(out, rows, summary, env, None if args.no_plots else method)
+    with out.writing() as folder:
+        written = write_outputs(folder, rows, summary, env, None if args.no_plots else method)
     payload = {"model": str(args.model), "env": policy.env_id, "env_kwargs": env_kwargs,
                "rows": [_json_row(r) for r in rows], "summary": summary,
                "files": [str(p) for p in written]}
@@ -98,6 +104,9 @@ def _json_row(row) -> dict:
     out = row.as_dict()
     out["cv_percent_at_target"] = out["cv_percent"]
     return out
+
+
+OUTPUTS = ("eval.csv", "eval.md", "eval.json", "patterns.png")
 
 
 def write_outputs(out: Path, rows, summary, env, plot_method) -> list:

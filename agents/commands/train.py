@@ -9,6 +9,7 @@ from pathlib import Path
 from spreadgym.agents.training import train
 from spreadgym.cli import arguments
 from spreadgym.config.overrides import parse_assignments
+from spreadgym.out_folder import OutFolder, named_files
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,16 +25,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-minutes", type=arguments.real(0.0, 1e6, low_open=True), metavar="M",
                         help="stop (and save) after M minutes of training in this invocation")
     parser.add_argument("--out", type=arguments.output_folder, required=True, metavar="DIR",
-                        help="run folder: model.zip, config.yaml, checkpoints/, tb/")
+                        help="run folder: model.zip, config.yaml, checkpoints/, tb/ (a run there is resumed)")
+    arguments.force_flag(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
-    result = train(args.algo, args.out, config_path=args.config, overrides=parse_assignments(args.overrides),
-                   env_id=args.env, timesteps=args.timesteps, seed=args.seed, max_minutes=args.max_minutes,
-                   log=log)
+    out = OutFolder(args.out, "train", ("model.zip", "config.yaml", "vecnormalize.pkl"), named_files(args.config),
+                    args.force, keeps_partial=True, marker="config.yaml")
+    out.check()
+    with out.writing() as folder:  # checkpoints are kept when interrupted: the next run resumes them
+        result = train(args.algo, folder, config_path=args.config, overrides=parse_assignments(args.overrides),
+                       env_id=args.env, timesteps=args.timesteps, seed=args.seed, max_minutes=args.max_minutes,
+                       log=log)
     resumed = f", resumed from {result.resumed_from} steps" if result.resumed_from is not None else ""
     print(f"trained {args.algo} to {result.num_timesteps} steps ({result.stopped}{resumed}) "
           f"in {result.wall_s / 60:.1f} min")

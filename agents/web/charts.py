@@ -30,6 +30,7 @@ FILE_TYPES = {".png": "image/png", ".csv": "text/csv", ".json": "application/jso
               ".html": "text/html"}
 MAX_READ_BYTES = 5_000_000  # chart.json / chart.md read for the page
 CANCEL_WAIT_S = 30.0  # after Ctrl-C, before the job's process is terminated
+SHUTDOWN_WAIT_S = 3.0  # the same when the server stops: it stops within a few seconds (finished cells are on disk)
 
 
 class NotFound(SpreadgymError):
@@ -45,16 +46,32 @@ def relative(text: str) -> tuple[str, ...]:
     return parts
 
 
+def confined(root: Path, path: Path) -> Optional[Path]:
+    """`path` with every link followed, where that lies inside `root`; else None. Every
+    file the chart page reads or lists under the charts folder goes through this one check."""
+    try:
+        resolved = Path(path).resolve()
+        return resolved if resolved.is_relative_to(Path(root).resolve()) else None
+    except (OSError, RuntimeError):  # a link loop
+        return None
+
+
 def inside(root: Path, text: str) -> Path:
     """`root/text`, refused unless it resolves inside `root` (links included)."""
-    path = root.joinpath(*relative(text)).resolve()
-    if not path.is_relative_to(root.resolve()):
+    path = confined(root, root.joinpath(*relative(text)))
+    if path is None:
         raise NotFound(f"chart: {brief(text)} is not under the charts folder")
     return path
 
 
-def is_chart(folder: Path) -> bool:
-    return (folder / "chart.json").is_file() or (folder / "manifest.json").is_file()
+def _file(root: Path, path: Path) -> Optional[Path]:
+    """`path`, resolved, where it is a file inside `root` (else None)."""
+    found = confined(root, path)
+    return found if found is not None and found.is_file() else None
+
+
+def is_chart(root: Path, folder: Path) -> bool:
+    return any(_file(root, folder / name) for name in ("chart.json", "manifest.json"))
 
 
 def chart_folders(root: Path) -> list[dict]:
@@ -68,19 +85,28 @@ def chart_folders(root: Path) -> list[dict]:
         here = Path(current)
         depth = len(here.relative_to(base).parts)
         dirs[:] = sorted(d for d in dirs if NAME.fullmatch(d) and d != "cells") if depth < MAX_DEPTH else []
-        if here != base and is_chart(here) and here.resolve().is_relative_to(base):
+        if here != base and is_chart(base, here):
             cells = here / "cells"
-            found.append({"name": here.relative_to(base).as_posix(), "finished": (here / "chart.json").is_file(),
-                          "cells": len(list(cells.glob("*.json"))) if cells.is_dir() else 0})
+            found.append({"name": here.relative_to(base).as_posix(),
+                          "finished": _file(base, here / "chart.json") is not None,
+                          "cells": len(_listed(base, cells, ".json")) if cells.is_dir() else 0})
             if len(found) >= MAX_LISTED:
                 break
     return found
 
 
-def _read(path: Path) -> Optional[str]:
-    if not path.is_file():
+def _listed(root: Path, folder: Path, *suffixes: str) -> list[str]:
+    """Names of the files in `folder` of the given suffixes that the file route serves: a
+    listing never shows a file a request for it would refuse (a link out of the charts folder)."""
+    return sorted(p.name for p in folder.iterdir() if p.suffix in suffixes and NAME.fullmatch(p.name)
+                  and _file(root, p) is not None)
+
+
+def _read(root: Path, path: Path) -> Optional[str]:
+    found = _file(root, path)
+    if found is None:
         return None
-    with open(path, "rb") as handle:
+    with open(found, "rb") as handle:
         data = handle.read(MAX_READ_BYTES + 1)
     if len(data) > MAX_READ_BYTES:
         raise SpreadgymError(f"{path.name}: larger than {MAX_READ_BYTES} bytes; allowed: at most {MAX_READ_BYTES}")
@@ -90,21 +116,19 @@ def _read(path: Path) -> Optional[str]:
 def chart_detail(root: Path, name: str) -> dict:
     """A chart folder for the page: its printable table (chart.md), rows (chart.json) and pictures."""
     folder = inside(root, name)
-    if not folder.is_dir() or not is_chart(folder):
+    if not folder.is_dir() or not is_chart(root, folder):
         raise NotFound(f"chart: no chart folder {brief(name)} under the charts folder")
-    text = _read(folder / "chart.json")
+    text = _read(root, folder / "chart.json")
     try:
         payload = json.loads(text) if text is not None else None
     except json.JSONDecodeError as exc:
         raise SpreadgymError(f"chart.json of {brief(name)}: not valid JSON (line {exc.lineno})") from None
     rows = payload.get("rows") if isinstance(payload, dict) else None
-    files = sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix in FILE_TYPES
-                   and NAME.fullmatch(p.name))
     cells = folder / "cells"
-    pictures = sorted(f"cells/{p.name}" for p in cells.glob("*.png") if NAME.fullmatch(p.name)) \
-        if cells.is_dir() else []
-    return {"name": name, "finished": (folder / "chart.json").is_file(), "markdown": _read(folder / "chart.md"),
-            "rows": rows if isinstance(rows, list) else [], "files": files, "cell_pictures": pictures}
+    pictures = [f"cells/{p}" for p in _listed(root, cells, ".png")] if cells.is_dir() else []
+    return {"name": name, "finished": text is not None, "markdown": _read(root, folder / "chart.md"),
+            "rows": rows if isinstance(rows, list) else [], "files": _listed(root, folder, *FILE_TYPES),
+            "cell_pictures": pictures}
 
 
 def chart_file(root: Path, name: str) -> tuple[Path, str]:
@@ -232,8 +256,9 @@ class ChartJobs:
             _stop_group(process.pid)
             return
 
-    def cancel(self) -> dict:
-        """Interrupt the running job as Ctrl-C would; terminate it if it does not end in time."""
+    def cancel(self, wait_s: float = CANCEL_WAIT_S) -> dict:
+        """Interrupt the running job as Ctrl-C would; end its process group if it has not
+        ended within `wait_s`."""
         process = self.process
         if process is None or not self.running():
             raise SpreadgymError("chart job: none is running")
@@ -242,17 +267,15 @@ class ChartJobs:
             os.kill(process.pid, signal.SIGINT)
         except ProcessLookupError:  # it ended just now
             pass
-        process.join(timeout=CANCEL_WAIT_S)
-        if process.is_alive():
-            process.terminate()
-            process.join(timeout=5.0)
+        process.join(timeout=wait_s)
         _stop_group(process.pid)
+        process.join(timeout=5.0)
         with self.lock:
             if self.status["state"] == "running":
                 self.status.update(state="cancelled", message="cancelled; finished cells kept", ended=time.time())
         return dict(self.status)
 
     def shutdown(self) -> None:
-        """Stop a running job when the server stops."""
+        """Stop a running job when the server stops (within SHUTDOWN_WAIT_S and a moment)."""
         if self.running():
-            self.cancel()
+            self.cancel(SHUTDOWN_WAIT_S)

@@ -2,7 +2,9 @@
 overrides, run as `spreadgym simulate` runs it, and the data of its pictures.
 
 Every input goes through the CLI's own checks (scene loader, override parser, precision
-and run limits), so a bad one is the CLI's one-line message naming the key.
+and run limits), so a bad one is the CLI's one-line message naming the key. The
+simulations run in the server's worker process (`agents.web.workers`): `simulate_task`
+and `pattern_task` are what it calls, `check_request` what the server checks first.
 """
 
 from __future__ import annotations
@@ -10,8 +12,7 @@ from __future__ import annotations
 import io
 import json
 import math
-import threading
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 import yaml
@@ -38,7 +39,6 @@ TRACKS = 30  # granule paths kept for the plan view, as `simulate --plot`
 RAYS = 80  # departure rays drawn
 LANDINGS = 1500  # landing points sent for the scatter
 PRECISE = {"precision": REFERENCE_PRECISION_PP, "max_runs": REFERENCE_MAX_RUNS}  # the page's "precise" button
-_RUN_LOCK = threading.Lock()  # one simulation at a time: they use every core already
 
 
 class SimulateRequest(BaseModel):
@@ -97,13 +97,29 @@ def check_flags(request: SimulateRequest) -> None:
         raise SpreadgymError(f"max_runs: {request.max_runs} is out of range; allowed [2, {MAX_RUNS_LIMIT}]")
 
 
-def simulate(request: SimulateRequest, tracks: int = 0):
-    """(scene, PreciseEstimate) of a request, as `spreadgym simulate` computes it."""
+def check_request(request: SimulateRequest) -> Scene:
+    """The request's scene, every flag checked as the CLI checks it (before the work waits its turn)."""
     check_flags(request)
-    scene = scene_of(request)
-    with _RUN_LOCK:
-        return scene, simulate_precisely(scene, request.precision, request.max_runs, model=request.model,
-                                         tracks=tracks)
+    return scene_of(request)
+
+
+def simulate(request: SimulateRequest, tracks: int = 0, check: Optional[Callable[[], None]] = None):
+    """(scene, PreciseEstimate) of a request, as `spreadgym simulate` computes it; `check()`
+    is called after every run (it raises to stop the work)."""
+    scene = check_request(request)
+    return scene, simulate_precisely(scene, request.precision, request.max_runs, model=request.model, tracks=tracks,
+                                     progress=None if check is None else lambda _done, _cap: check())
+
+
+def simulate_task(args: dict, check: Callable[[], None]) -> str:
+    """The worker's `POST /api/simulate`: `spreadgym simulate --json`'s text."""
+    _scene, precise = simulate(SimulateRequest(**args), check=check)
+    return json_text(precise.to_json())
+
+
+def pattern_task(args: dict, check: Callable[[], None]) -> str:
+    """The worker's `POST /api/pattern`."""
+    return pattern_payload(SimulateRequest(**args), check)
 
 
 def json_text(payload: dict) -> str:
@@ -208,14 +224,14 @@ def plot_data(scene: Scene, precise) -> dict:
     return {"plan": plan, "landing": _xy(landing[keep]) if len(keep) else [[], []], "trays": tray_data}
 
 
-def warm_up() -> None:
+def warm_up(_args: dict, check: Callable[[], None]) -> None:
     """One small run of the default scene, so the compiled model is loaded before the first page."""
-    simulate(SimulateRequest(set={"sim.granules": 256}, max_runs=2), tracks=TRACKS)
+    simulate(SimulateRequest(set={"sim.granules": 256}, max_runs=2), tracks=TRACKS, check=check)
 
 
-def pattern_payload(request: SimulateRequest) -> str:
+def pattern_payload(request: SimulateRequest, check: Optional[Callable[[], None]] = None) -> str:
     """`POST /api/pattern`: the simulate JSON ("metrics"), the CV as the CLI prints it and the pictures' data."""
-    scene, precise = simulate(request, tracks=TRACKS)
+    scene, precise = simulate(request, tracks=TRACKS, check=check)
     metrics = json.loads(json_text(precise.to_json()))
     cv, se = metrics["cv_percent_at_target"], metrics["cv_standard_error_percent"]
     cv_text = "nothing landed" if cv is None else with_error(cv, se, "%")

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import argparse
 import math
-import tempfile
 from pathlib import Path
 from typing import Callable, Optional
+
+from spreadgym.threads import MAX_THREADS
 
 
 def integer(low: int, high: Optional[int] = None) -> Callable[[str], int]:
@@ -44,24 +45,28 @@ def real(low: float, high: float, low_open: bool = False) -> Callable[[str], flo
 
 
 def output_folder(text: str) -> Path:
-    """A folder that can be written: created here if missing (so a command never runs
-    to its end and then fails to save), then probed with a temporary file (permission
-    bits alone say nothing to root or about read-only file systems)."""
-    path = Path(text)
-    if path.exists() and not path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} is a file, not a folder")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=path):
-            pass
-    except OSError as exc:
-        raise argparse.ArgumentTypeError(f"cannot write in {text}: {exc.strerror or exc}") from None
-    return path
+    """A folder that can be written (`spreadgym.out_folder.folder_problem`), checked
+    without creating anything: the command makes it when it writes, so a refused or
+    failed run leaves no empty folder behind."""
+    from spreadgym.out_folder import folder_problem
+
+    problem = folder_problem(Path(text))
+    if problem:
+        raise argparse.ArgumentTypeError(f"{text}: {problem}")
+    return Path(text)
+
+
+def force_flag(parser: argparse.ArgumentParser) -> None:
+    """`--force`: write into an --out folder that holds other outputs (never over an input)."""
+    parser.add_argument("--force", action="store_true",
+                        help="write into --out even where it holds another command's outputs or files of the same "
+                             "names (inputs are never written over)")
 
 
 SEED = integer(0, 2**32 - 1)
 COUNT = integer(1)
 GRANULES = integer(1, 1_000_000)
+THREADS = integer(1, MAX_THREADS)  # --threads of every command
 
 
 def materials_file(text: str) -> Path:

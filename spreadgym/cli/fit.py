@@ -30,34 +30,48 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"granules per evaluation (default {FIT_GRANULES}; a fit's time grows with it)")
     parser.add_argument("--seed", type=arguments.SEED, default=None, metavar="S",
                         help="sim.seed of every evaluation and the start design's seed (default: the scene's)")
-    parser.add_argument("--threads", type=arguments.COUNT, default=None, metavar="N",
+    parser.add_argument("--threads", type=arguments.THREADS, default=None, metavar="N",
                         help="threads for the simulations (default: the cores this process may use)")
     arguments.add_materials_flag(parser)
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     parser.add_argument("--out", type=arguments.output_folder, metavar="DIR",
-                        help="write the fitted scene, estimates, pattern, CV curve and picture into DIR")
+                        help="write the fitted scene, estimates, pattern, CV curve and picture into DIR (created "
+                             "when the fit is done; never over an input; an earlier fit's outputs need --force)")
+    arguments.force_flag(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     from spreadgym.config.overrides import parse_assignments
     from spreadgym.config.scene import load_scene, scene_with
-    from spreadgym.fit.outputs import payload, predict, write_outputs
-    from spreadgym.fit.run import fit_tray_test
+    from spreadgym.fit.outputs import OUTPUT_FILES, payload, predict, write_outputs
+    from spreadgym.fit.run import fit_tray_test, work_text
     from spreadgym.fit.space import parse_fit_specs
     from spreadgym.fit.trays import read_trays
+    from spreadgym.out_folder import OutFolder, named_files
     from spreadgym.threads import set_threads
 
     if args.threads is not None:
         set_threads(args.threads)
-    scene = load_scene(args.scene, parse_assignments(args.overrides), args.materials)
+    overrides = parse_assignments(args.overrides)
+    scene = load_scene(args.scene, overrides, args.materials)
     seed = scene.sim.seed if args.seed is None else args.seed
     scene = scene_with(scene, {"sim.seed": seed})
-    space = parse_fit_specs(args.fit, scene)
+    space = parse_fit_specs(args.fit, scene, fixed=overrides)
     test = read_trays(args.trays, scene.pattern.tray_width_m)
-    print(f"fitting {', '.join(space.keys)} to {test.count} trays ...", file=sys.stderr)
+    out = None
+    if args.out:
+        out = OutFolder(args.out, "fit", files=OUTPUT_FILES, inputs=named_files(args.trays, args.scene, args.materials),
+                        force=args.force, replaces_own=False)
+        out.check()
+    print(f"fitting {', '.join(space.keys)} to {test.count} trays: {work_text(scene, args.granules)} ...",
+          file=sys.stderr)
     fit = fit_tray_test(scene, space, test, model=args.model, granules=args.granules, seed=seed)
     prediction = predict(fit)
-    data = write_outputs(fit, prediction, args.out) if args.out else payload(fit, prediction, None)
+    if out is None:
+        data = payload(fit, prediction, None)
+    else:
+        with out.writing() as folder:
+            data = write_outputs(fit, prediction, folder)
     if args.json:
         print_json(data)
     else:
@@ -67,12 +81,15 @@ def run(args: argparse.Namespace) -> int:
 
 def summary(data: dict) -> str:
     """The estimates and intervals, for people."""
+    from spreadgym.fit.measured import MIN_SPANNED_SHARE
     from spreadgym.fit.uncertainty import REGIME_SWITCH  # loaded by the fit already
 
     rows = []
     for key, v in data["parameters"].items():
         switch = data.get("regime_switch", {}).get(key, 0.0)
-        if data["identifiable"][key]:
+        if data.get("estimate_at_search_bound", {}).get(key):
+            state = "no: the estimate is at the search bound (the best fit may lie beyond it: widen the range)"
+        elif data["identifiable"][key]:
             state = "yes"
         elif switch > REGIME_SWITCH:
             state = (f"no: vane friction turns {100 * switch:.0f} % of the granules between sliding and rolling "
@@ -96,6 +113,12 @@ def summary(data: dict) -> str:
     if cv is not None:
         lines.append(f"fitted CV at {data['target_swath_m']:g} m ({data['driving']}): {cv:.1f} % "
                      f"(90 % band {band[0]:.1f}-{band[1]:.1f} %)")
+    measured = data.get("measured_cv_percent_at_target")
+    if measured is not None:
+        lines.append(f"measured trays' own CV at {data['target_swath_m']:g} m: {measured:.1f} %")
+    else:
+        lines.append(f"measured trays' own CV: not given (the trays span {100 * data['measured_span_share']:.0f} % "
+                     f"of the fitted pattern's mass; at least {100 * MIN_SPANNED_SHARE:.0f} % needed)")
     if data["scene_yaml"]:
         lines.append(f"wrote {data['scene_yaml']} and the rest of the fit beside it")
     return "\n".join(lines)

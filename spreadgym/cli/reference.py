@@ -33,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="N", help=f"at most N runs (default {REFERENCE_MAX_RUNS})")
     parser.add_argument("--replicates", type=arguments.integer(2, 65536), metavar="K",
                         help=f"exactly K independent runs pooled instead (at least {MIN_RUNS}; ignores --precision)")
-    parser.add_argument("--threads", type=arguments.integer(1, 4096), metavar="N",
+    parser.add_argument("--threads", type=arguments.THREADS, metavar="N",
                         help="threads to use (default: SPREADGYM_THREADS, else every core this process may use)")
     arguments.add_materials_flag(parser)
     parser.add_argument("--json", action="store_true", help="print the reference as JSON")

@@ -42,11 +42,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              f"are pooled until it is reached (default {SIMULATE_PRECISION_PP:g})")
     parser.add_argument("--max-runs", type=arguments.integer(2, MAX_RUNS_LIMIT), default=SIMULATE_MAX_RUNS,
                         metavar="N", help=f"at most N runs of sim.granules each (default {SIMULATE_MAX_RUNS})")
-    parser.add_argument("--threads", type=arguments.integer(1, 4096), metavar="N",
+    parser.add_argument("--threads", type=arguments.THREADS, metavar="N",
                         help="threads to use (default: SPREADGYM_THREADS, else every core this process may use)")
     arguments.add_materials_flag(parser)
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
-    parser.add_argument("--plot", type=arguments.output_folder, metavar="DIR", help="write PNG pictures into DIR")
+    parser.add_argument("--plot", type=arguments.output_folder, metavar="DIR",
+                        help="write PNG pictures into DIR (made when the run is done; never over an input)")
+    arguments.force_flag(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,14 +61,23 @@ def run(args: argparse.Namespace) -> int:
     if args.threads is not None:
         set_threads(args.threads)
     scene = load_scene(args.scene, parse_assignments(args.overrides), args.materials)
+    plots = None
+    if args.plot:
+        from spreadgym.out_folder import OutFolder, named_files
+        from spreadgym.viz.plots import SIMULATION_PLOTS
+
+        plots = OutFolder(args.plot, "simulate", SIMULATION_PLOTS, named_files(args.scene, args.materials), args.force,
+                          marker=SIMULATION_PLOTS[0], flag="--plot")
+        plots.check()
     with tqdm(desc="runs", unit="run", file=sys.stderr, disable=None, leave=False) as bar:
         precise = simulate_precisely(scene, args.precision, args.max_runs, model=args.model,
                                      tracks=30 if args.plot else 0, progress=lambda done, _cap: bar.update(1))
     written = []
-    if args.plot:
+    if plots is not None:
         from spreadgym.viz.plots import write_simulation_plots
 
-        written = write_simulation_plots(precise.as_result(), args.plot)
+        with plots.writing() as folder:
+            written = write_simulation_plots(precise.as_result(), folder)
     payload = precise.to_json()
     if args.json:
         print_json(payload)

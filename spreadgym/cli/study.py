@@ -35,7 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--granules", type=arguments.GRANULES, default=200, help="granules per case (default 200)")
     parser.add_argument("--model", default="pymunk", choices=MODELS, help="spinner model (default: pymunk)")
     parser.add_argument("--out", type=arguments.output_folder, default=Path("docs/study"),
-                        help="folder for the CSV and PNGs (default docs/study)")
+                        help="folder for the CSV and PNGs (default docs/study; a study's earlier outputs are "
+                             "replaced)")
+    arguments.force_flag(parser)
     parser.add_argument("--json", action="store_true", help='print {"rows": [...]} as JSON')
 
 
@@ -43,17 +45,21 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from spreadgym.errors import SpreadgymError
-    from spreadgym.studies.paper import paper_cases, paper_study, plot_paper_study, write_study
+    from spreadgym.out_folder import OutFolder
+    from spreadgym.studies.paper import CSV_NAME, FIGURES, paper_cases, paper_study, plot_paper_study, write_study
 
     if args.granules < 1:
         raise SpreadgymError(f"--granules: {args.granules} must be at least 1")
+    out = OutFolder(args.out, "study", (CSV_NAME, *FIGURES), force=args.force, marker=CSV_NAME)
+    out.check()
     total = 2 * len(paper_cases())
     with tqdm(total=total, desc="study paper", unit="case", file=sys.stderr, disable=None, leave=False) as bar:
         def progress(done: int, _total: int) -> None:
             bar.update(done - bar.n)
 
         rows = paper_study(granules=args.granules, model=args.model, progress=progress)
-    written = [write_study(rows, args.out)] + plot_paper_study(rows, args.out)
+    with out.writing() as folder:
+        written = [write_study(rows, folder)] + plot_paper_study(rows, folder)
     if args.json:
         print_json({"rows": rows})
     else:

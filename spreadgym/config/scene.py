@@ -68,7 +68,9 @@ class Vanes(StrictModel):
     pitch_deg: Union[Real, list[Real]] = Field(
         default=0.0, description="angle from radial, + = tip leans in the direction of rotation; each within +-60 deg"
     )
-    height_m: Real = Field(default=0.03, gt=0, le=0.5, description="vane height (plan view: informational)")
+    height_m: Real = Field(default=0.03, gt=0, le=0.5,
+                           description="vane height above the disc: a falling or bouncing granule above it passes "
+                                       "over the vanes, so it moves the pattern")
     material: Optional[str] = Field(default=None, description="default: spinner material")
 
     @model_validator(mode="after")

@@ -41,6 +41,7 @@ STORED = Path(__file__).with_name("discrepancy.csv")
 CALIBRATION_SEED = 2_000_003  # sim.seed of the first calibration point (the next ones count up)
 CALIBRATION_GRANULES = 8192
 CALIBRATION_REPLICATES = 16
+_ON_GRID = 1e-6  # a tray centre this close (in tray widths) to a grid tray is on it
 
 
 @dataclass(frozen=True)
@@ -56,15 +57,23 @@ class Discrepancy:
         return len(self.delta)
 
     def on_trays(self, x_m: np.ndarray, width_m: float) -> tuple[np.ndarray, np.ndarray]:
-        """(C, n) discrepancies and their variances on trays centred at `x_m`; 0 where a
-        point did not measure a tray (a tray the calibration runs left empty)."""
+        """(C, n) discrepancies and their variances on trays centred at `x_m` (any layout):
+        a tray on the calibration's grid (multiples of `width_m`) takes its tray's values,
+        one between two grid trays the linear interpolation of theirs; 0 where a point did
+        not measure a tray it needs (a tray the calibration runs left empty)."""
         x_m = np.asarray(x_m, float)
         delta, variance = np.zeros((self.points, x_m.size)), np.zeros((self.points, x_m.size))
+        grid = x_m / width_m
+        low = np.floor(grid + _ON_GRID)
+        weight = np.clip(grid - low, 0.0, 1.0)
+        weight[weight <= _ON_GRID] = 0.0
         for c, (x, d, v) in enumerate(zip(self.x_m, self.delta, self.variance)):
             index = {int(i): k for k, i in enumerate(np.rint(x / width_m))}
-            for i, tray in enumerate(np.rint(x_m / width_m).astype(int)):
-                if tray in index:
-                    delta[c, i], variance[c, i] = d[index[tray]], v[index[tray]]
+            for i, (tray, share) in enumerate(zip(low.astype(int), weight)):
+                ends = [(tray, 1.0 - share)] + ([(tray + 1, share)] if share > 0 else [])
+                if all(t in index for t, _ in ends):
+                    delta[c, i] = sum(s * d[index[t]] for t, s in ends)
+                    variance[c, i] = sum(s * s * v[index[t]] for t, s in ends)
         return delta, variance
 
 

@@ -28,7 +28,9 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from spreadgym.config.scene import Scene, scene_with
+from spreadgym.config.base import brief
+from spreadgym.config.scene import MAX_GRANULE_COPIES, Scene, granule_copies, scene_with
+from spreadgym.errors import SpreadgymError
 from spreadgym.fit.regime import rolling
 from spreadgym.fit.space import FitSpace
 from spreadgym.fit.trays import TrayTest
@@ -37,6 +39,9 @@ from spreadgym.spread.pipeline import SimulationResult
 
 SIGMA_BOUNDS = (1e-3, 3.0)  # catch noise s.d. of log mass: 0.1 % .. 300 %
 SOFT_WIDTH = 0.25  # landing spread, in trays (see soft_tray_masses)
+MIN_COVERED_SHARE = 0.9  # of the measured mass, in trays the simulated pattern reaches; below it the model
+# does not describe the test (trays on the wrong axis or pass, or settings the test was not made at). A test
+# made by the model itself leaves only its outermost grams uncovered (stray granules the fit's sample missed)
 
 
 @dataclass(frozen=True)
@@ -48,12 +53,14 @@ class Prediction:
     replicate_kg: np.ndarray  # (K, n) each independent replicate's share of the simulated mass
     floor_kg: float  # added to every tray's mass (half a landing sample)
     rolling: np.ndarray  # (N,) bool: each simulated granule left its disc rolling (regime.rolling)
+    covered_share: float  # share of the measured mass in trays where any simulated landing fell
 
     def leave_out(self, k: int) -> "Prediction":
         """The prediction from every replicate but `k` (rescaled to all K), same variances."""
         count = self.replicate_kg.shape[0]
         kept = (self.replicate_kg.sum(axis=0) - self.replicate_kg[k]) * count / (count - 1)
-        return Prediction(np.log(kept + self.floor_kg), self.variance, self.replicate_kg, self.floor_kg, self.rolling)
+        return Prediction(np.log(kept + self.floor_kg), self.variance, self.replicate_kg, self.floor_kg, self.rolling,
+                          self.covered_share)
 
 
 class PatternModel:
@@ -67,10 +74,7 @@ class PatternModel:
         caught = test.mass_kg > 0
         self.rows = np.flatnonzero(caught)
         self.log_mass = np.log(test.mass_kg[caught])
-        p = scene.pattern
-        local = test.x_m[caught] - test.lane[caught] * p.target_swath_m  # in each pass's own frame
-        mirrored = (p.driving == "back-and-forth") & (test.lane[caught] % 2 == 1)
-        self.local_index = np.rint(np.where(mirrored, -local, local) / p.tray_width_m).astype(np.int64)
+        self.local_x_m = pass_frame(test, scene)[caught]
         self.evaluations = 0
         self._cache: dict[tuple, Prediction] = {}
 
@@ -82,13 +86,17 @@ class PatternModel:
         return scene_with(self.scene, self.space.overrides(unit))
 
     def predict(self, units: Sequence[Sequence[float]]) -> list[Prediction]:
-        """Predictions at unit-cube points, the uncached ones simulated in one batch."""
+        """Predictions at unit-cube points, the uncached ones simulated in batches of at
+        most MAX_GRANULE_COPIES landing points (as `simulate` pools its runs: the memory
+        of a batch stays bounded whatever the granules and the design's size)."""
         keys = [_key(u) for u in units]
         todo = list(dict.fromkeys(k for k in keys if k not in self._cache))
-        if todo:
-            results = run_batch([self.scene_at(k) for k in todo], model=self.model, ci=False)
-            self.evaluations += len(todo)
-            for key, result in zip(todo, results):
+        size = max(1, MAX_GRANULE_COPIES // granule_copies(self.scene))
+        for first in range(0, len(todo), size):
+            chunk = todo[first:first + size]
+            results = run_batch([self.scene_at(k) for k in chunk], model=self.model, ci=False)
+            self.evaluations += len(chunk)
+            for key, result in zip(chunk, results):
                 self._cache[key] = self.prediction(result)
         return [self._cache[k] for k in keys]
 
@@ -96,7 +104,7 @@ class PatternModel:
         """A run's pattern on the measured trays, with its Monte Carlo and counting variances."""
         sample = result.sample
         k = int(result.granules.replicate.max()) + 1
-        per = soft_tray_masses(sample.x_m, sample.mass_kg, sample.replicate, k, self.local_index,
+        per = soft_tray_masses(sample.x_m, sample.mass_kg, sample.replicate, k, self.local_x_m,
                                self.scene.pattern.tray_width_m)
         pooled = per.sum(axis=0)
         floor = 0.5 * float(np.mean(sample.mass_kg)) if sample.mass_kg.size else 1e-12
@@ -109,30 +117,66 @@ class PatternModel:
         v_sim = (per_kg * mu + floor ** 2) / mu ** 2
         masses = result.granules.mass_kg
         granule_kg = float(np.sum(masses ** 2) / np.sum(masses))  # mass-weighted mean granule mass
-        v_count = granule_kg / self.test.mass_kg[self.rows]
-        return Prediction(np.log(mu), v_sim + v_count, per, floor, rolling(result))
+        measured = self.test.mass_kg[self.rows]
+        v_count = granule_kg / measured
+        covered = float(measured[pooled > 0].sum() / measured.sum())
+        return Prediction(np.log(mu), v_sim + v_count, per, floor, rolling(result), covered)
+
+
+def check_covered(prediction: Prediction, test: TrayTest, where: str) -> None:
+    """Refuse a fit whose simulated pattern misses the measured mass (`MIN_COVERED_SHARE`)."""
+    if not prediction.covered_share >= MIN_COVERED_SHARE:
+        raise SpreadgymError(
+            f"--trays: {brief(test.source)}: {100 * prediction.covered_share:.0f} % of the measured mass lies in "
+            f"trays the simulated pattern reaches {where}; at least {100 * MIN_COVERED_SHARE:.0f} % must, or the fit "
+            "has nothing to fit (check x: 0 on the machine's track, positive to its right; the pass column; the "
+            "scene's settings and the --fit ranges)")
+
+
+def pass_frame(test: TrayTest, scene: Scene) -> np.ndarray:
+    """(n,) each tray's centre in its own pass's frame (m): pass j shifted by j W and, for
+    back-and-forth driving, mirrored on odd j, so every row sits on the single pass."""
+    p = scene.pattern
+    local = test.x_m - test.lane * p.target_swath_m
+    mirrored = (p.driving == "back-and-forth") & (test.lane % 2 == 1)
+    return np.where(mirrored, -local, local)
 
 
 def soft_tray_masses(x_m: np.ndarray, mass_kg: np.ndarray, replicate: np.ndarray, replicates: int,
-                     tray_index: np.ndarray, tray_width_m: float) -> np.ndarray:
-    """(K, n) mass of each replicate under trays i * w (i = `tray_index`), each landing spread
-    evenly over SOFT_WIDTH * w across the track, so a landing that moves with the
-    parameters passes its mass from tray to tray continuously instead of in one jump (the
-    fit's objective is then smooth at the scale of its steps; the blur changes a tray's
-    catch by about (SOFT_WIDTH w)^2 / 24 times the pattern's curvature)."""
+                     centre_m: np.ndarray, tray_width_m: float) -> np.ndarray:
+    """(K, n) mass of each replicate in trays of width w centred at `centre_m` (any layout,
+    gaps and overlaps allowed), each landing spread evenly over SOFT_WIDTH * w across the
+    track, so a landing that moves with the parameters passes its mass from tray to tray
+    (or into a gap) continuously instead of in one jump (the fit's objective is then
+    smooth at the scale of its steps; the blur changes a tray's catch by about
+    (SOFT_WIDTH w)^2 / 24 times the pattern's curvature).
+
+    A tray [a, b) catches F(b) - F(a), F(t) = sum of m_j clip((t - s_j) / h, 0, 1) over
+    the landings (s_j the left end of landing j's spread, h its width): with A(t) and
+    B(t) the mass and first moment of the landings with s_j <= t,
+    F(t) = A(t - h) + (t (A(t) - A(t - h)) - (B(t) - B(t - h))) / h. A and B are read at
+    the 4 n points t and t - h of the tray edges only, so the work is O(N log n) and the
+    memory O(K n) however far apart the trays lie."""
     h = SOFT_WIDTH * tray_width_m
-    left = (np.asarray(x_m) - 0.5 * h) / tray_width_m + 0.5  # tray i covers [i - 1/2, i + 1/2) w
-    first = np.floor(left).astype(np.int64)  # the tray of the landing's left end
-    share = np.minimum(1.0, (first + 1 - left) * tray_width_m / h)  # the part in that tray
-    lowest, span = int(tray_index.min()), int(tray_index.max() - tray_index.min()) + 1
-    rows = np.asarray(replicate, dtype=np.int64)
-    grid = np.zeros(replicates * span)
-    for offset, weight in ((0, share), (1, 1.0 - share)):
-        column = first + offset - lowest
-        kept = (column >= 0) & (column < span)
-        grid += np.bincount(rows[kept] * span + column[kept], weights=(mass_kg * weight)[kept],
-                            minlength=replicates * span)
-    return grid.reshape(replicates, span)[:, tray_index - lowest]
+    centre = np.asarray(centre_m, dtype=float)
+    edges = np.concatenate([centre - 0.5 * tray_width_m, centre + 0.5 * tray_width_m])
+    queries = np.unique(np.concatenate([edges, edges - h]))
+    start = np.asarray(x_m, dtype=float) - 0.5 * h
+    slot = np.searchsorted(queries, start, side="left")  # landing j counts at every query q_k >= s_j: k >= slot
+    size = queries.size + 1
+    flat = np.asarray(replicate, dtype=np.int64) * size + slot
+    mass = np.asarray(mass_kg, dtype=float)
+    below = [np.cumsum(np.bincount(flat, weights=w, minlength=replicates * size).reshape(replicates, size),
+                       axis=1)[:, :queries.size] for w in (mass, mass * start)]  # A(q_k), B(q_k) per replicate
+
+    def caught_below(t: np.ndarray) -> np.ndarray:
+        at, back = np.searchsorted(queries, t), np.searchsorted(queries, t - h)
+        (a, a_back), (b, b_back) = ((m[:, at], m[:, back]) for m in below)
+        return a_back + (t * (a - a_back) - (b - b_back)) / h
+
+    n = centre.size
+    caught = caught_below(edges)
+    return np.maximum(caught[:, n:] - caught[:, :n], 0.0)
 
 
 def _key(unit: Sequence[float]) -> tuple:

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import qmc
 
-from spreadgym.fit.likelihood import PatternModel, catch_sigma, residuals
+from spreadgym.fit.likelihood import PatternModel, catch_sigma, check_covered, residuals
 
 START_SIGMA = 0.05  # first guess of the catch noise (log s.d.); re-estimated at the optimum
 DIFF_STEP = 0.02  # central-difference step in the unit cube: many granules cross a tray edge, so
@@ -112,6 +112,8 @@ def fit(model: PatternModel, seed: int = 0, starts: int = 2) -> tuple[Objective,
     objective = Objective(model)
     design = sobol_points(model.space.dims, seed)
     costs = np.array([r @ r for r in objective.residuals_at(list(design))])
+    check_covered(max(model.predict(list(design)), key=lambda p: p.covered_share), model.test,
+                  "at any point of the start design over the search box")
     chosen: list[np.ndarray] = []
     for i in np.argsort(costs, kind="stable"):
         if all(np.max(np.abs(design[i] - c)) >= 0.25 for c in chosen):

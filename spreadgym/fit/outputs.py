@@ -22,6 +22,7 @@ import yaml
 
 from spreadgym.config.scene import Scene
 from spreadgym.fit.likelihood import residuals
+from spreadgym.fit.measured import MeasuredPattern, measured_pattern
 from spreadgym.fit.run import FitResult
 from spreadgym.fit.uncertainty import TRADE_OFF_CORRELATION
 from spreadgym.spread import estimate, pattern
@@ -45,6 +46,7 @@ class Prediction:
     cv_band_at_target: tuple[float, float]
     effective_swath_m: float
     effective_swath_band_m: tuple[float, float]
+    measured: MeasuredPattern  # the tray test's own pattern and CV curve on the same grid and widths
 
 
 def predict(fit: FitResult) -> Prediction:
@@ -65,10 +67,11 @@ def predict(fit: FitResult) -> Prediction:
     at_target = [r.metrics.cv_percent_at_target for r in results]
     known = [c for c in at_target if c is not None]
     swaths = [pattern.swath_from_curve(widths, c, p.cv_threshold_percent) for c in cvs]
+    measured = measured_pattern(fit.model.test, fit.scene, center, masses[0], widths)
     return Prediction(center, masses[0], masses.min(axis=0), masses.max(axis=0), widths, cvs[0], cvs.min(axis=0),
                       cvs.max(axis=0), head.cv_percent_at_target,
                       (min(known), max(known)) if known else (float("nan"), float("nan")),
-                      head.effective_swath_m, (min(swaths), max(swaths)))
+                      head.effective_swath_m, (min(swaths), max(swaths)), measured)
 
 
 def scene_yaml(fit: FitResult) -> str:
@@ -100,6 +103,7 @@ def payload(fit: FitResult, prediction: Prediction, scene_path: Optional[Path]) 
         "interval_level": 0.9,
         "search_ranges": {k: [float(lo), float(hi)] for k, lo, hi in zip(keys, fit.space.low, fit.space.high)},
         "interval_reaches_search_bound": {k: list(ends) for k, ends in zip(keys, fit.open_ends)},
+        "estimate_at_search_bound": {k: edge for k, edge in zip(keys, fit.at_bound)},
         "identifiable": dict(fit.identifiable),
         "regime_switch": {k: float(v) for k, v in zip(keys, fit.regime_switch)},
         "trade_offs": trade_offs,
@@ -111,6 +115,8 @@ def payload(fit: FitResult, prediction: Prediction, scene_path: Optional[Path]) 
         "discrepancy_points": fit.discrepancy_points,
         "cv_percent_at_target": prediction.cv_percent_at_target,
         "cv_percent_at_target_band": list(prediction.cv_band_at_target),
+        "measured_cv_percent_at_target": prediction.measured.cv_percent_at_target,
+        "measured_span_share": prediction.measured.spanned_share,
         "target_swath_m": fit.scene.pattern.target_swath_m,
         "driving": fit.scene.pattern.driving,
         "effective_swath_m": prediction.effective_swath_m,
@@ -120,9 +126,12 @@ def payload(fit: FitResult, prediction: Prediction, scene_path: Optional[Path]) 
     }
 
 
+OUTPUT_FILES = ("scene.yaml", "parameters.csv", "pattern.csv", "cv_curve.csv", "fit.png", "fit.json")
+
+
 def write_outputs(fit: FitResult, prediction: Prediction, out: Path) -> dict:
-    """Write scene.yaml, parameters.csv, pattern.csv, cv_curve.csv, fit.png and fit.json into
-    `out`; the JSON payload (its scene_yaml the written path)."""
+    """Write the OUTPUT_FILES (scene.yaml, parameters.csv, pattern.csv, cv_curve.csv, fit.png
+    and fit.json) into `out`; the JSON payload (its scene_yaml the written path)."""
     out.mkdir(parents=True, exist_ok=True)
     scene_path = out / "scene.yaml"
     scene_path.write_text(scene_yaml(fit), encoding="utf-8")
@@ -133,9 +142,10 @@ def write_outputs(fit: FitResult, prediction: Prediction, out: Path) -> dict:
                 for k, v in data["parameters"].items()])
     _write_csv(out / "pattern.csv", ["x_m", "fitted_g", "low_g", "high_g"],
                zip(prediction.center_m, prediction.mass_g, prediction.mass_low_g, prediction.mass_high_g))
-    _write_csv(out / "cv_curve.csv", ["bout_width_m", "cv_percent", "low_percent", "high_percent"],
-               zip(prediction.widths_m, prediction.cv_percent, prediction.cv_low_percent,
-                   prediction.cv_high_percent))
+    measured = prediction.measured.cv_percent
+    _write_csv(out / "cv_curve.csv", ["bout_width_m", "cv_percent", "low_percent", "high_percent", "measured_percent"],
+               zip(prediction.widths_m, prediction.cv_percent, prediction.cv_low_percent, prediction.cv_high_percent,
+                   [""] * prediction.widths_m.size if measured is None else measured))
     plot_fit(fit, prediction, out / "fit.png")
     (out / "fit.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
     return data
@@ -176,6 +186,9 @@ def plot_fit(fit: FitResult, prediction: Prediction, path: Path) -> None:
     ax_cv.fill_between(prediction.widths_m, prediction.cv_low_percent, prediction.cv_high_percent,
                        color="tab:blue", alpha=0.25, label="90 % band")
     ax_cv.plot(prediction.widths_m, prediction.cv_percent, color="tab:blue", label="fitted")
+    if prediction.measured.cv_percent is not None:
+        ax_cv.plot(prediction.widths_m, prediction.measured.cv_percent, color="black", ls=":",
+                   label="measured trays")
     ax_cv.axhline(p.cv_threshold_percent, color="grey", ls="--", lw=1, label=f"{p.cv_threshold_percent:g} %")
     ax_cv.set_xlabel(f"bout width (m), {p.driving}")
     ax_cv.set_ylabel("CV (%)")

@@ -8,11 +8,11 @@ from typing import Optional, Union
 
 import numpy as np
 
-from spreadgym.config.scene import Scene, scene_with
+from spreadgym.config.scene import MAX_GRANULE_COPIES, Scene, granule_copies, scene_with
 from spreadgym.errors import SpreadgymError
 from spreadgym.fit import optimise, uncertainty
 from spreadgym.fit.discrepancy import Discrepancy, stored_discrepancy
-from spreadgym.fit.likelihood import PatternModel, residuals
+from spreadgym.fit.likelihood import PatternModel, check_covered, residuals
 from spreadgym.fit.regime import REGIME_KEYS
 from spreadgym.fit.space import FitSpace
 from spreadgym.fit.trays import TrayTest
@@ -21,6 +21,8 @@ from spreadgym.physics.selection import choose_model
 FIT_GRANULES = 4096  # granules per evaluation (x sim.angle_copies landing samples)
 FIT_REPLICATES = 16  # independent replicates per evaluation: the jackknife of the simulation's error (15 d.o.f.)
 RECENTRES = 1  # profiles redone at most once from a lower point they found
+TYPICAL_EVALUATIONS = "100-250"  # per fitted key, measured on the bench's fits (178-463 for two keys)
+AT_BOUND = 1e-3  # unit cube: an estimate this close to a search bound is on it
 RECENTRE_RISE = 0.1  # cost units: a lower point by less is the objective's granular jitter
 
 
@@ -36,6 +38,7 @@ class FitResult:
     high: np.ndarray
     interval_points: list[np.ndarray]  # the profile ends (unit cube), 2 per key: the band's corners
     open_ends: list[tuple[bool, bool]]  # the interval reached the search bound (low, high)
+    at_bound: list[bool]  # the estimate itself lies on a search bound (the optimum may lie beyond it)
     identifiable: dict[str, bool]
     correlation: np.ndarray  # (d, d)
     weakest: dict[str, float]  # unit-cube direction the test determines least
@@ -63,6 +66,17 @@ class FitResult:
     def evaluation_scene(self) -> Scene:
         """The fitted scene as the fit simulated it (its granules and seed)."""
         return self.model.scene_at(self.space.unit(self.estimate))
+
+
+def work_text(scene: Scene, granules: Optional[int] = FIT_GRANULES) -> str:
+    """The work of a fit, said before it starts: landing points per evaluation, the
+    evaluations a fit takes, and the batch that bounds its memory."""
+    evaluation = scene_with(scene, {} if granules is None else {"sim.granules": granules})
+    points = granule_copies(evaluation)
+    batch = max(1, MAX_GRANULE_COPIES // points)
+    return (f"{evaluation.sim.granules} granules x {points // evaluation.sim.granules} landing points each per "
+            f"evaluation, about {TYPICAL_EVALUATIONS} evaluations per key, at most {batch} evaluation(s) "
+            f"({batch * points} landing points) at a time")
 
 
 def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "auto",
@@ -94,11 +108,12 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
         if lowest.cost >= best.cost - RECENTRE_RISE:
             break
         best = optimise.minimise(objective, [lowest.unit])  # a profile found a lower point: start again there
+    check_covered(pattern_model.predict([best.unit])[0], test, "at the estimate")
     sim_sd = uncertainty.simulation_sd(objective, best, jac)
     replicates = pattern_model.predict([best.unit])[0].replicate_kg.shape[0]
     model_sd, calibration_points = np.zeros(space.dims), 0
     if discrepancy is not None:
-        delta, variance = discrepancy.on_trays(pattern_model.local_index * scene.pattern.tray_width_m,
+        delta, variance = discrepancy.on_trays(pattern_model.local_x_m,
                                                scene.pattern.tray_width_m)
         model_sd, calibration_points = uncertainty.model_sd(objective, best, jac, delta, variance), discrepancy.points
     low, high = zip(*(uncertainty.widened(best.unit[j], i.low, i.high,
@@ -112,13 +127,15 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
     points = [p for i in intervals for p in (i.low_point, i.high_point)]
     open_ends = [(bool(i.low_open or lo == 0.0), bool(i.high_open or hi == 1.0))
                  for i, lo, hi in zip(intervals, low, high)]
-    identifiable = {key: uncertainty.determined(lo, hi, s) for key, lo, hi, s in zip(space.keys, low, high, switch)}
+    at_bound = [bool(u <= AT_BOUND or u >= 1.0 - AT_BOUND) for u in best.unit]
+    identifiable = {key: uncertainty.determined(lo, hi, s) and not edge
+                    for key, lo, hi, s, edge in zip(space.keys, low, high, switch, at_bound)}
     direction, eigenvalue = uncertainty.weakest_direction(info)
     _, log_scale = residuals(pattern_model.log_mass, pattern_model.predict([best.unit])[0], objective.sigma)
     return FitResult(
         scene=scene, space=space, model=pattern_model, estimate=space.values(best.unit),
         low=space.values(np.array(low)), high=space.values(np.array(high)), interval_points=points,
-        open_ends=open_ends, identifiable=identifiable, correlation=uncertainty.correlations(info),
+        open_ends=open_ends, at_bound=at_bound, identifiable=identifiable, correlation=uncertainty.correlations(info),
         weakest={k: float(v) for k, v in zip(space.keys, direction)}, weakest_eigenvalue=float(eigenvalue),
         catch_sd=objective.sigma, simulation_sd=sim_sd * (space.high - space.low),
         model_sd=model_sd * (space.high - space.low), bare_low=space.values(np.array(bare_low)),

@@ -6,9 +6,10 @@ each key in its own unit (as the scene file writes it).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
@@ -44,9 +45,13 @@ class FitSpace:
         return {key: float(v) for key, v in zip(self.keys, self.values(unit))}
 
 
-def parse_fit_specs(texts: Iterable[str], scene: Scene) -> FitSpace:
-    """Parse `KEY=LO:HI` items (comma-separated, flags repeatable) and check each key is a
-    numeric scene key whose whole range the scene accepts."""
+def parse_fit_specs(texts: Iterable[str], scene: Scene, fixed: Iterable[str] = ()) -> FitSpace:
+    """Parse `KEY=LO:HI` items (comma-separated, flags repeatable) and check, before any
+    work, that each key is a real-valued scene key not also given by `--set` (`fixed`),
+    and that the scene accepts every corner of the search box (and its centre): keys
+    that constrain each other (a feed radius inside a fitted disc radius) fail here,
+    naming the corner, not mid-fit at a point nobody typed."""
+    fixed = set(fixed)
     keys, low, high = [], [], []
     for text in texts:
         for item in text.split(","):
@@ -57,6 +62,9 @@ def parse_fit_specs(texts: Iterable[str], scene: Scene) -> FitSpace:
                 raise SpreadgymError(f"--fit: expected KEY=LO:HI, got {brief(item)}")
             if key in keys:
                 raise ConfigError(key, "is fitted twice in --fit")
+            if key in fixed:
+                raise ConfigError(key, "is set by --set and fitted by --fit; give it one way (--set fixes it, "
+                                       "--fit searches it)")
             if key.startswith(NOT_FITTED):
                 raise ConfigError(key, "cannot be fitted: sim.*, pattern.* and the names describe the run and "
                                        "the test, not the material (set them with --set)")
@@ -66,7 +74,11 @@ def parse_fit_specs(texts: Iterable[str], scene: Scene) -> FitSpace:
                 raise ConfigError(key, f"range {brief(span)} is not two numbers LO:HI") from None
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise ConfigError(key, f"range {lo:g}:{hi:g} must be finite with LO < HI")
-            for value in (lo, 0.5 * (lo + hi), hi):  # the middle catches whole-number keys
+            current = _value(scene, key)
+            if isinstance(current, int) and not isinstance(current, bool):
+                raise ConfigError(key, f"is a whole number ({key} = {current}); --fit searches real-valued keys "
+                                       "only: fit at each count with --set instead")
+            for value in (lo, hi):
                 scene_with(scene, {key: value})  # a ConfigError naming the key, value and range
             keys.append(key)
             low.append(lo)
@@ -75,4 +87,31 @@ def parse_fit_specs(texts: Iterable[str], scene: Scene) -> FitSpace:
         raise SpreadgymError("--fit: give at least one KEY=LO:HI")
     if len(keys) > MAX_KEYS:
         raise SpreadgymError(f"--fit: {len(keys)} keys; allowed: at most {MAX_KEYS}")
-    return FitSpace(tuple(keys), np.asarray(low), np.asarray(high))
+    space = FitSpace(tuple(keys), np.asarray(low), np.asarray(high))
+    _check_box(space, scene)
+    return space
+
+
+def _value(scene: Scene, key: str) -> Any:
+    """The scene's value at a dotted key (None where there is none: `scene_with` names the problem)."""
+    node: Any = scene.model_dump()
+    for part in key.split("."):
+        if isinstance(node, dict) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        else:
+            return None
+    return node
+
+
+def _check_box(space: FitSpace, scene: Scene) -> None:
+    """Every corner of the search box (2^d, d <= MAX_KEYS) and its centre make a valid scene."""
+    for corner in [*itertools.product((0.0, 1.0), repeat=space.dims), (0.5,) * space.dims]:
+        values = space.overrides(corner)
+        try:
+            scene_with(scene, values)
+        except ConfigError as exc:
+            point = ", ".join(f"{k}={v:g}" for k, v in values.items())
+            raise SpreadgymError(f"--fit: the search box's {'centre' if 0.5 in corner else 'corner'} {point} is not "
+                                 f"a valid scene ({exc}); narrow the ranges") from None

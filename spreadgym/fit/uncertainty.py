@@ -103,8 +103,9 @@ def model_sd(objective: Objective, best: Minimum, jac: np.ndarray, delta: np.nda
     prediction = objective.model.predict([best.unit])[0]
     root_w = 1.0 / np.sqrt(objective.sigma ** 2 + prediction.variance)
     weight = root_w ** 2
-    profiled = np.eye(weight.size) - np.outer(np.ones(weight.size), weight / weight.sum())
-    move = np.linalg.pinv(jac.T @ jac) @ jac.T @ (root_w[:, None] * profiled)  # (d, n)
+    # L = diag(root_w) (I - 1 w' / sum w), applied without forming the (n, n) matrix
+    step = np.linalg.pinv(jac.T @ jac) @ jac.T * root_w  # (d, n)
+    move = step - np.outer(step.sum(axis=1), weight / weight.sum())  # (d, n)
     moves = np.asarray(delta) @ move.T  # (C, d)
     noise = np.asarray(variance) @ (move ** 2).T  # (C, d)
     return np.sqrt(np.clip(np.mean(moves ** 2, axis=0) - np.mean(noise, axis=0), 0.0, None))

@@ -52,6 +52,8 @@ RPMS = (200.0, 500.0, 800.0, 1100.0)
 DIAMETERS_M = (0.2, 0.3, 0.4)
 BASE_MATERIAL, BASE_RPM, BASE_DIAMETER_M = "mc", 500.0, 0.3
 CSV_NAME = "paper-study.csv"
+FIGURES = ("fig6-speed-by-material.png", "fig7-spin-by-material.png", "fig8-speed-vs-rpm.png",
+           "fig9-speed-vs-diameter.png", "departure-angle.png")
 
 
 @dataclass(frozen=True)

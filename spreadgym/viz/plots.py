@@ -362,8 +362,12 @@ def cv_vs_bout_width(ax, result) -> None:
     ax.legend(loc="upper left", fontsize="small", framealpha=0.9)
 
 
+SIMULATION_PLOTS = ("plan_view.png", "landing.png", "pattern.png", "cv_curve.png")
+
+
 def write_simulation_plots(result, out_dir) -> list[Path]:
-    """Write plan_view.png, landing.png, pattern.png and cv_curve.png into out_dir (created)."""
+    """Write the SIMULATION_PLOTS (plan_view.png, landing.png, pattern.png and cv_curve.png)
+    into out_dir (created)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []

@@ -5,6 +5,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import ray
@@ -62,3 +63,33 @@ def test_same_chart_in_process_and_on_a_three_node_cluster(tmp_path):
         ray.shutdown()
         cluster.shutdown()
     assert without_wall(remote.payload["rows"]) == without_wall(local.payload["rows"])
+
+
+def test_the_embedded_ray_listens_on_loopback_only_and_keeps_its_session_in_a_user_cache(
+        tmp_path, monkeypatch, listening_sockets):
+    """While a small chart runs on the embedded Ray, every listening socket of this process
+    and its descendants (GCS, raylet, workers, agents) is on 127.0.0.1; the session folder
+    lies under the per-user cache, and is gone when the chart ends."""
+    import shutil
+    import tempfile
+
+    from spreadgym.agents.chart import chart
+    from spreadgym.agents.chart.runner import session_root
+
+    cache = Path(tempfile.mkdtemp(prefix="c"))  # a short path: Ray's sockets live in the session folder
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
+    seen = []
+
+    def snapshot(_cell, _record):
+        seen.append(listening_sockets(os.getpid()))
+        seen.append(sorted(p.name for p in session_root().iterdir()))
+
+    chart("paper", "pellet", "3,4", tmp_path / "chart", budget=1, granules=64, objective="nominal", workers=1,
+          progress=False, on_cell=snapshot, search_model="analytic", verify_runs=2)
+    sockets = [row for rows in seen[0::2] for row in rows]
+    assert {name for _, _, name, _ in sockets} >= {"gcs_server", "raylet"}, sockets
+    assert all(loopback for *_, loopback in sockets), [row for row in sockets if not row[3]]
+    assert any(name.startswith("session_2") for name in seen[1]) and session_root() == cache / "spreadgym" / "ray"
+    assert not [p for p in session_root().iterdir() if p.name.startswith("session_2")]  # removed at the end
+    assert not ray.is_initialized() and os.environ.get("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER") is None
+    shutil.rmtree(cache)

@@ -138,15 +138,15 @@ def test_subprocess_exit_code_and_no_traceback():
     assert "--mass: -1" in proc.stderr
 
 
-def test_an_output_folder_is_created_and_probed_before_any_work(tmp_path):
+def test_an_output_folder_is_probed_before_any_work_and_not_created(tmp_path):
     import argparse
 
     from spreadgym.cli.arguments import output_folder
 
-    made = output_folder(str(tmp_path / "a" / "b"))
-    assert made.is_dir() and not list(made.iterdir())  # the probe file is gone
+    assert output_folder(str(tmp_path / "a" / "b")) == tmp_path / "a" / "b"
+    assert not list(tmp_path.iterdir())  # nothing made: the command makes it when it writes; the probe file is gone
     (tmp_path / "f").write_text("x")
-    for bad, words in ((tmp_path / "f", "is a file, not a folder"), (tmp_path / "f" / "x", "cannot write in"),
+    for bad, words in ((tmp_path / "f", "is a file, not a folder"), (tmp_path / "f" / "x", "f is a file, not a folder"),
                        ("/proc/spreadgym-probe", "cannot write in")):  # root passes permission bits; procfs does not
         with pytest.raises(argparse.ArgumentTypeError, match=words):
             output_folder(str(bad))

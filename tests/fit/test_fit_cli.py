@@ -60,12 +60,23 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys):
         (["--trays", trays, "--fit", "sim.granules=1:5"], "sim.granules: cannot be fitted"),
         (["--trays", trays, "--fit", "contact.nope=0:1"], "contact.nope: unknown key"),
         (["--trays", str(tmp_path / "missing.csv"), "--fit", f"{KEY}=0.3:0.7"], "cannot read"),
-        (["--trays", trays, "--fit", f"{KEY}=0.3:0.7", "--set", "pattern.tray_width_m=0.25"],
-         "the closest trays are 0.5 m apart but pattern.tray_width_m is 0.25 m"),
+        (["--trays", trays, "--fit", f"{KEY}=0.3:0.7", "--set", "pattern.tray_width_m=1.0"],
+         "overlap: their centres are closer than pattern.tray_width_m = 1 m"),
+        (["--trays", trays, "--fit", f"{KEY}=0.3:0.7", "--set", f"{KEY}=0.5"],
+         f"{KEY}: is set by --set and fitted by --fit; give it one way"),
+        (["--trays", trays, "--fit", "vanes.count=2:6"], "vanes.count: is a whole number (vanes.count = 4)"),
+        (["--trays", trays, "--fit", "spinner.radius_m=0.1:0.3,feed.radius_m=0.05:0.14"],
+         "--fit: the search box's corner spinner.radius_m=0.1, feed.radius_m=0.14 is not a valid scene"),
+        (["--trays", "/dev/zero", "--fit", f"{KEY}=0.3:0.7"], "is not a regular file"),
+        (["--trays", trays, "--fit", f"{KEY}=0.3:0.7", "--granules", "1000000"],
+         "landing points per run; allowed: at most 4000000"),
     ):
         code = main(["fit", *argv])
         err = capsys.readouterr().err
         assert code == 2 and expected in err and err.count("\n") == 1, (argv, err)
+    code = main(["fit", "--trays", trays, "--fit", f"{KEY}=0.3:0.7", "--threads", "5000"])  # as simulate caps it
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 2 and last.endswith("argument --threads: 5000 is out of range; allowed: in [1, 4096]")
 
 
 def test_the_summary_says_why_a_key_is_not_identifiable():
@@ -73,10 +84,45 @@ def test_the_summary_says_why_a_key_is_not_identifiable():
 
     data = {"scene": "paper", "trays_file": "t.csv", "trays_used": 21, "evaluations": 9, "wall_s": 1.0,
             "catch_noise_sd": 0.05, "discrepancy_points": 4,
-            "parameters": {k: {"estimate": 0.3, "low": 0.25, "high": 0.35} for k in ("a", "b", "c")},
-            "identifiable": {"a": True, "b": False, "c": False},
-            "regime_switch": {"a": 0.0, "b": 0.4, "c": 0.0}, "trade_offs": [], "cv_percent_at_target": None,
-            "cv_percent_at_target_band": None, "scene_yaml": None}
+            "parameters": {k: {"estimate": 0.3, "low": 0.25, "high": 0.35} for k in ("a", "b", "c", "d")},
+            "identifiable": {"a": True, "b": False, "c": False, "d": False},
+            "regime_switch": {"a": 0.0, "b": 0.4, "c": 0.0, "d": 0.0}, "trade_offs": [], "cv_percent_at_target": None,
+            "cv_percent_at_target_band": None, "scene_yaml": None, "measured_cv_percent_at_target": None,
+            "measured_span_share": 0.5, "estimate_at_search_bound": {"a": False, "b": False, "c": False, "d": True}}
     text = summary(data)
     assert "turns 40 % of the granules between sliding and rolling" in text
     assert "no: the test does not determine it" in text
+    assert "d    0.3       [0.25, 0.35]   no: the estimate is at the search bound" in text
+    assert "measured trays' own CV: not given (the trays span 50 % of the fitted pattern's mass" in text
+
+
+def test_out_never_replaces_an_input_nor_an_earlier_fit(tmp_path, capsys):
+    """fit --trays d/pattern.csv --scene d/scene.yaml --out d would replace both inputs with
+    outputs of the same names: refused before the fit, --force or not; an earlier fit's
+    outputs need --force; a refused or failed run leaves no folder behind."""
+    import shutil
+
+    trays = tmp_path / "d" / "pattern.csv"
+    trays.parent.mkdir()
+    shutil.copy(_trays(tmp_path), trays)
+    scene = tmp_path / "d" / "scene.yaml"
+    assert main(["fit", "--trays", str(trays), "--fit", f"{KEY}=0.3:0.7", "--set", "granule.rotation=locked",
+                 "--out", str(tmp_path / "x"), "--granules", "256"]) == 0
+    capsys.readouterr()
+    shutil.copy(tmp_path / "x" / "scene.yaml", scene)
+    before = {p: p.read_bytes() for p in (trays, scene)}
+    for extra in ([], ["--force"]):
+        for argv in (["--trays", str(trays)], ["--trays", str(tmp_path / "trays.csv"), "--scene", str(scene)]):
+            code = main(["fit", *argv, "--fit", f"{KEY}=0.3:0.7", "--out", str(trays.parent), *extra])
+            err = capsys.readouterr().err
+            assert code == 2 and "would replace the input" in err and err.count("\n") == 1, err
+    assert {p: p.read_bytes() for p in (trays, scene)} == before
+    code = main(["fit", "--trays", str(trays), "--fit", f"{KEY}=0.3:0.7", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert code == 2 and "holds an earlier `spreadgym fit`'s outputs" in err and "--force" in err, err
+    far = tmp_path / "far.csv"  # trays 100 m off: the fit refuses after its start design
+    far.write_text("x_m,mass_g\n" + "".join(f"{100 + 0.5 * i},{1 + i % 3}\n" for i in range(9)))
+    code = main(["fit", "--trays", str(far), "--fit", f"{KEY}=0.3:0.7", "--out", str(tmp_path / "new" / "deeper"),
+                 "--granules", "64"])
+    capsys.readouterr()
+    assert code == 2 and not (tmp_path / "new").exists()  # the fit failed: no folder left behind

@@ -9,6 +9,7 @@ import pytest
 
 from spreadgym.cli.main import main
 from spreadgym.errors import SpreadgymError
+from spreadgym.out_folder import STAMP
 from spreadgym.studies import paper as study
 
 ROW_KEYS = {
@@ -114,7 +115,7 @@ def test_cli_writes_the_files(tmp_path, capsys, monkeypatch):
     assert main(["study", "paper", "--granules", "3", "--out", str(tmp_path), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert set(data) == {"rows"} and len(data["rows"]) == 2 * len(quick_cases())
-    assert {p.name for p in tmp_path.iterdir()} == PNGS | {study.CSV_NAME}
+    assert {p.name for p in tmp_path.iterdir()} == PNGS | {study.CSV_NAME, STAMP}  # STAMP: whose outputs they are
 
 
 def test_cli_rejects_zero_granules(tmp_path, capsys):

@@ -17,6 +17,7 @@ from spreadgym.agents.web.app import MAX_BODY_BYTES, create_app
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = {"sim.granules": 256}
+LOCAL = "http://127.0.0.1"  # the Host the app answers (TestClient says "testserver" otherwise)
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +31,7 @@ def charts_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def client(charts_dir):
-    with TestClient(create_app(charts_dir)) as test_client:
+    with TestClient(create_app(charts_dir), base_url=LOCAL) as test_client:
         yield test_client
 
 

@@ -25,7 +25,7 @@ def trays(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory):
-    with TestClient(create_app(tmp_path_factory.mktemp("charts"))) as test_client:
+    with TestClient(create_app(tmp_path_factory.mktemp("charts")), base_url="http://127.0.0.1") as test_client:
         yield test_client
 
 
