@@ -59,3 +59,50 @@ def with_error(value: float, error: Optional[float], unit: str = "") -> str:
     places = decimals_supported(error) if error is not None else 1
     shown = f"{value:.{places}f}" + (f" +- {error:.{places}f}" if error is not None else "")
     return f"{shown} {unit}".rstrip()
+
+
+def stamp() -> str:
+    """What a printed record carries to say when and by what it was made: 'spreadgym 0.1.0, 2026-11-27 14:05'."""
+    from datetime import datetime
+
+    from spreadgym import __version__
+
+    return f"spreadgym {__version__}, {datetime.now().strftime('%Y-%m-%d %H:%M')}"
+
+
+def machine_lines(scene) -> list[tuple[str, str]]:
+    """The machine of a scene in a record's words (label, text): disc, vanes, plates, second disc, trays."""
+    disc, vanes = scene.spinner, scene.vanes
+    inner = vanes.per_vane("inner_radius_m")
+    outer = vanes.outer_radius_m or disc.radius_m
+    lines = [("machine", scene.name + (f": {scene.description}" if scene.description else "")),
+             ("disc", f"{2000 * disc.radius_m:.0f} mm, {disc.direction}, {1000 * disc.height_m:.0f} mm above ground, "
+                      f"{disc.material}" + (f", cone {disc.cone_deg:g}°" if disc.cone_deg else "")),
+             ("vanes", f"{vanes.count}, from {1000 * min(inner):.0f} to {1000 * outer:.0f} mm, "
+                       f"{vanes.material or disc.material}")]
+    if scene.twin is not None:
+        lines.append(("second disc", f"{scene.twin.spacing_m:g} m beside the first"))
+    for i, plate in enumerate(scene.deflectors):
+        lines.append((f"plate {i}", f"{1000 * plate.length_m:.0f} mm at ({plate.x_m:g}, {plate.y_m:g}) m, "
+                                    f"{plate.material}"))
+    lines.append(("trays", f"{scene.pattern.tray_width_m:g} m wide, CV threshold "
+                           f"{scene.pattern.cv_threshold_percent:g} %"))
+    return lines
+
+
+def setting_lines(scene) -> list[tuple[str, str, str]]:
+    """Every setting an operator dials on the scene's machine (scene key, label, value): disc speed, vane pitch
+    (one per vane where the scene gives one per vane), drop point, each plate's angle, working width and driving."""
+    pitch = scene.vanes.pitch_deg
+    lines = [("spinner.rpm", "disc speed", f"{scene.spinner.rpm:.0f} rpm")]
+    if isinstance(pitch, list):
+        lines += [(f"vanes.pitch_deg.{k}", f"vane {k} pitch", f"{p:.1f}°") for k, p in enumerate(pitch)]
+    else:
+        lines.append(("vanes.pitch_deg", "vane pitch", f"{pitch:.1f}°"))
+    lines += [("feed.radius_m", "drop radius", f"{1000 * scene.feed.radius_m:.0f} mm"),
+              ("feed.angle_deg", "drop angle", f"{scene.feed.angle_deg:.1f}°")]
+    lines += [(f"deflectors.{i}.angle_deg", f"plate {i} angle", f"{plate.angle_deg:.1f}°")
+              for i, plate in enumerate(scene.deflectors)]
+    lines += [("pattern.target_swath_m", "working width", f"{scene.pattern.target_swath_m:g} m"),
+              ("pattern.driving", "driving", scene.pattern.driving)]
+    return lines

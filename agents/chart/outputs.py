@@ -16,7 +16,11 @@ import numpy as np
 
 from spreadgym.agents.chart.spec import Cell, ChartSpec
 from spreadgym.agents.chart.store import CHART_FILES, HEAD, TAIL, ChartStore, json_text
+from spreadgym.agents.chart.sweep import reversal_prices
 from spreadgym.out_folder import write_atomic
+from spreadgym.report import machine_lines, setting_lines, stamp
+
+REVERSAL_MARK = "↕"  # a cell where a setting turns by more than the steady-rows target allows (quality.py)
 
 
 def columns(rows: list[dict]) -> list[str]:
@@ -43,7 +47,34 @@ def chart_payload(spec: ChartSpec, records: list[dict], notes: list[str]) -> dic
             "widest_width_m": widest_widths(spec, rows),
             "cells": [{"fertilizer": r["row"]["fertilizer"], "width_m": r["row"]["width_m"],
                        **{k: v for k, v in r["detail"].items() if k not in ("trays", "cv_curve")}} for r in records],
-            "notes": notes}
+            "reversals": reversal_prices(spec, records), "notes": notes}
+
+
+def fixed_settings(spec: ChartSpec) -> list[tuple[str, str]]:
+    """The settings the chart keeps at the scene's values (label, value): every dialled setting
+    (`report.setting_lines`) that no chart axis sets, the width and driving aside (the rows and the title)."""
+    scene = spec.base_scene()
+    searched = {a.key for a in spec.space(scene).axes}
+    return [(label, value) for key, label, value in setting_lines(scene)
+            if key.rsplit(".", 1)[0] not in searched and key not in searched
+            and key not in ("pattern.target_swath_m", "pattern.driving")]
+
+
+def record_lines(spec: ChartSpec) -> list[tuple[str, str]]:
+    """What a printed chart says about its machine, its fixed settings and its making (label, text)."""
+    fixed = "; ".join(f"{label} {value}" for label, value in fixed_settings(spec)) or "none"
+    return machine_lines(spec.base_scene()) + [("fixed settings", fixed), ("made by", stamp())]
+
+
+def reversal_text(spec: ChartSpec, reversal: dict) -> str:
+    """One remaining reversal in words: where, which settings turn and how, and its price."""
+    turns = "; ".join(f"{name.replace('_', ' ')} " + " → ".join(_dial({name: v}, name) for v in values)
+                      for name, values in zip(reversal["settings"], reversal["values"]))
+    aim = f"p{quantile_text(spec)} CV" if spec.objective == "robust" else "CV"
+    price = ("no scored setting removes it" if reversal["price_pp"] is None else
+             f"a steady setting costs +{reversal['price_pp']:.2f} pp of the {aim} "
+             f"(the cheapest scored one, at {reversal['priced_at_width_m']:g} m)")
+    return f"{reversal['fertilizer']} {reversal['width_m']:g} m: {turns}; {price}"
 
 
 def write_chart(store: ChartStore, records: list[dict], notes: list[str]) -> tuple[list[Path], dict]:
@@ -86,7 +117,9 @@ def markdown(spec: ChartSpec, payload: dict) -> str:
     rows, threshold = payload["rows"], payload["cv_threshold_percent"]
     names = [c for c in payload["columns"] if c not in HEAD and c not in TAIL]
     by_cell = {(r["fertilizer"], r["width_m"]): r for r in rows}
+    turning = {(v["fertilizer"], v["width_m"]) for v in payload.get("reversals", [])}
     lines = [f"# Spreading chart: scene {spec.scene['name']}, {spec.driving} driving", "",
+             *[f"- {label}: {text}" for label, text in record_lines(spec)], "",
              f"{method_text(spec)}, verified with the {spec.verify_model} model "
              f"({spec.verify_runs} runs of {spec.granules} granules pooled). CV at the working width "
              f"± its standard error, and p{quantile_text(spec)}: the CV {quantile_text(spec)} % of batches stay "
@@ -105,12 +138,26 @@ def markdown(spec: ChartSpec, payload: dict) -> str:
                 f"CV {r['cv_percent']:.1f} ± {_fmt(r['cv_standard_error_percent'], 2)} %, "
                 f"p{quantile_text(spec)} {r['cv_p90_percent']:.1f} %")
             mark = "" if r["cv_percent"] is not None and r["cv_percent"] <= threshold else " ✗"
+            if (fertilizer, width) in turning:
+                mark += f" {REVERSAL_MARK}"
             cells.append(f"{settings_text(r, names)}<br>{cv}{mark}")
         lines.append(f"| {width:g} m | " + " | ".join(cells) + " |")
     lines += ["", f"Widest width at CV ≤ {threshold:g} %: " + "; ".join(
         f"{f} {'none of these' if w is None else f'{w:g} m'}" for f, w in payload["widest_width_m"].items()) + "."]
+    lines += reversal_lines(spec, payload)
     lines += [f"- {note}" for note in payload["notes"]]
     return "\n".join(lines) + "\n"
+
+
+def reversal_lines(spec: ChartSpec, payload: dict) -> list[str]:
+    """chart.md's account of the rows' remaining reversals (the steady-rows target's), each with its price."""
+    found = payload.get("reversals", [])
+    if not found:
+        return ["", "Steady rows: no setting turns by more than 5 % of the disc speed or 3° of pitch between "
+                    "neighbouring widths."]
+    return ["", f"{REVERSAL_MARK} Settings that turn between neighbouring widths by more than 5 % of the disc "
+                "speed or 3° of pitch (do not interpolate across these widths):", ""] + [
+        f"- {reversal_text(spec, v)}" for v in found]
 
 
 def quantile_text(spec: ChartSpec) -> str:
@@ -125,9 +172,12 @@ def method_text(spec: ChartSpec) -> str:
               f"per cell, aiming at {aim})")
     if spec.method == "policy":
         return "Settings proposed by a trained policy (no search)"
-    steady = ("" if spec.steady_tolerance_pp == 0.0 else
-              f"; steady rows chosen among settings within two standard errors of each cell's best plus "
-              f"{spec.steady_tolerance_pp:g} pp (--steady-tolerance-pp), a wider tie than the default")
+    tolerance = ("" if spec.steady_tolerance_pp == 0.0 else
+                 f" plus {spec.steady_tolerance_pp:g} pp (--steady-tolerance-pp)")
+    prefer = ("the lowest disc speed, then the smallest change from the neighbouring widths"
+              if spec.tie_preference == "lowest-rpm" else "the smallest change from the neighbouring widths")
+    steady = (f"; steady rows: among the settings within two standard errors of each cell's best{tolerance}, "
+              f"{prefer}")
     if spec.method == "policy+search":
         return f"Settings found by {search}, started at a trained policy's proposal{steady}"
     return f"Settings found by {search}{steady}"
@@ -143,6 +193,9 @@ th, td { border: 1px solid #777; padding: 2pt 5pt; text-align: right; }
 th { background: #e8e8e8; }
 td.width, th.width { text-align: left; font-weight: bold; }
 tr.over td { color: #a00; }
+tr.turn td.width::after { content: " \\2195"; }
+dl { font-size: 8.5pt; margin: 4pt 0; display: grid; grid-template-columns: max-content auto; gap: 0 8pt; }
+dt { font-weight: bold; } dd { margin: 0; }
 @page { size: A4 portrait; margin: 1cm; }
 @media print { body { margin: 0; } h2 { break-after: avoid; } table { break-inside: avoid; } }
 """
@@ -179,7 +232,10 @@ def printable(spec: ChartSpec, payload: dict) -> str:
              f"({esc(spec.verify_model)} model, {spec.verify_runs} runs of {spec.granules} granules), and the CV "
              f"{q} % of batches stay under (p{q}: fertilizer friction, restitution, size and density, disc speed "
              f"and vane pitch varied as the variability model says). Rows in red exceed the {threshold:g} % "
-             "threshold.</p>"]
+             "threshold.</p>",
+             "<dl>" + "".join(f"<dt>{esc(label)}</dt><dd>{esc(text)}</dd>" for label, text in record_lines(spec))
+             + "</dl>"]
+    turning = {(v["fertilizer"], v["width_m"]) for v in payload.get("reversals", [])}
     for fertilizer in spec.fertilizers:
         mine = sorted((r for r in rows if r["fertilizer"] == fertilizer), key=lambda r: r["width_m"])
         widest = payload["widest_width_m"].get(fertilizer)
@@ -191,11 +247,13 @@ def printable(spec: ChartSpec, payload: dict) -> str:
             cv = r["cv_percent"]
             over = cv is None or cv > threshold
             band = "-" if cv is None else f"{cv:.1f} ± {_fmt(r['cv_standard_error_percent'], 2)}"
-            tr = '<tr class="over">' if over else "<tr>"
+            kinds = " ".join(k for k, on in (("over", over), ("turn", (fertilizer, r["width_m"]) in turning)) if on)
+            tr = f'<tr class="{kinds}">' if kinds else "<tr>"
             parts.append(f'{tr}<td class="width">{r["width_m"]:g}</td>'
                          + "".join(f"<td>{_dial(r, n)}</td>" for n in names)
                          + f"<td>{band}</td><td>{r['cv_p90_percent']:.1f}</td></tr>")
         parts.append("</table>")
+    parts += [f"<p>{esc(line)}</p>" for line in reversal_lines(spec, payload) if line]
     parts += [f"<p>{esc(note)}</p>" for note in payload["notes"]]
     parts.append("</body></html>")
     return "\n".join(parts) + "\n"

@@ -1,9 +1,11 @@
 """Whether a chart is one an operator can follow and trust (issue 31's targets), read off
 finished charts, and the `make bench` entry that runs them.
 
-* Robust: the share of cells whose verified p90 CV is at most `P90_RATIO` times their
-  verified nominal CV, and the cells whose nominal CV is at most `NOMINAL_OK_PERCENT` but
-  whose p90 exceeds `P90_CAP_PERCENT`.
+* Robust: the share of cells whose verified p90 CV is at most the larger of `P90_RATIO`
+  times their verified nominal CV and the nominal plus `P90_MARGIN_PP` (issue 45: at
+  nominal CVs of 1-2 % real batches move a cell by 1-2 pp, so a ratio alone cannot hold),
+  and the cells whose nominal CV is at most `NOMINAL_OK_PERCENT` but whose p90 exceeds
+  `P90_CAP_PERCENT`.
 * Steady rows: a reversal is an interior width of a row where a setting turns (it rose
   from the narrower width and falls to the wider one, or the other way round); its size
   is the smaller of the two steps. Reversals larger than `RPM_REVERSAL` (relative to the
@@ -19,6 +21,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 P90_RATIO = 1.5
+P90_MARGIN_PP = 2.0
 NOMINAL_OK_PERCENT = 10.0
 P90_CAP_PERCENT = 15.0
 RPM_REVERSAL = 0.05
@@ -52,14 +55,19 @@ def row_reversals(rows: list[dict], fertilizer: str) -> dict:
     return {"rpm": big_rpm, "pitch": big_pitch}
 
 
+def p90_within_target(cv_percent: float, p90_percent: float) -> bool:
+    """The robustness target: p90 <= max(P90_RATIO x nominal, nominal + P90_MARGIN_PP)."""
+    return p90_percent <= max(P90_RATIO * cv_percent, cv_percent + P90_MARGIN_PP)
+
+
 def chart_quality(payload: dict) -> dict:
     """The targets' figures of one finished chart (chart.json's payload)."""
     rows = [r for r in payload["rows"] if r["cv_percent"] is not None]
-    ratio_ok = [r for r in rows if r["cv_p90_percent"] <= P90_RATIO * r["cv_percent"]]
+    ratio_ok = [r for r in rows if p90_within_target(r["cv_percent"], r["cv_p90_percent"])]
     capped = [r for r in rows if r["cv_percent"] <= NOMINAL_OK_PERCENT]
     over_cap = [(r["fertilizer"], r["width_m"]) for r in capped if r["cv_p90_percent"] > P90_CAP_PERCENT]
     steady = {f: row_reversals(payload["rows"], f) for f in dict.fromkeys(r["fertilizer"] for r in payload["rows"])}
-    return {"cells": len(payload["rows"]), "p90_within_ratio_share": len(ratio_ok) / max(1, len(rows)),
+    return {"cells": len(payload["rows"]), "p90_within_target_share": len(ratio_ok) / max(1, len(rows)),
             "nominal_ok_cells": len(capped), "p90_over_cap": over_cap,
             "mean_cv_percent": sum(r["cv_percent"] for r in rows) / max(1, len(rows)),
             "mean_cv_p90_percent": sum(r["cv_p90_percent"] for r in rows) / max(1, len(rows)),
@@ -73,7 +81,7 @@ def search_pick_rows(payload: dict) -> list[dict]:
     `sweep.search_pick_verified` recorded when it moved the cell)."""
     from spreadgym.agents.chart.spec import Cell, ChartSpec
 
-    spec = ChartSpec(**{k: tuple(v) if k in ("fertilizers", "widths_m") else v for k, v in payload["spec"].items()})
+    spec = ChartSpec.from_manifest(payload["spec"])
     out = []
     for row, cell in zip(payload["rows"], payload["cells"]):
         block = cell["sweep"] or {}
@@ -146,7 +154,7 @@ def chart_quality_rows(charts=QUALITY_CHARTS, options: Optional[dict] = None, wo
         rows.append({"scene": scene, "widths": widths, "method": method, "wall_s": wall,
                      **{k: v for k, v in quality.items() if k != "reversals"}})
         if progress:
-            progress(f"chart-quality: {scene} {widths} {method}: p90 within {P90_RATIO}x on "
-                     f"{quality['p90_within_ratio_share']:.0%}, {quality['rpm_reversals']} rpm and "
+            progress(f"chart-quality: {scene} {widths} {method}: p90 within max({P90_RATIO}x, +{P90_MARGIN_PP:g} pp) "
+                     f"on {quality['p90_within_target_share']:.0%}, {quality['rpm_reversals']} rpm and "
                      f"{quality['pitch_reversals']} pitch reversals, {wall:.0f} s")
     return rows

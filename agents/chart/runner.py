@@ -298,7 +298,8 @@ def repair_row(spec: ChartSpec, cells: list, spaces: list, records: dict, remote
             walls[k] += wall
         return found
 
-    tried = sweep.repair(spaces, [c.width_m for c in cells], [d["tie_set"] for d in details], score)
+    tried = sweep.repair(spaces, [c.width_m for c in cells], [d["tie_set"] for d in details], score,
+                         preference=spec.tie_preference)
     return tried, walls
 
 
@@ -316,7 +317,7 @@ def sweep_rows(spec: ChartSpec, store: ChartStore, records: dict, remote: bool =
         tried, walls = repair_row(spec, cells, spaces, records, remote)
         details = [records[c.key]["detail"] for c in cells]
         points = sweep.row_with(spaces, [d["tie_set"] for d in details], tried)
-        picks = sweep.steadiest(points)
+        picks = sweep.steadiest(points, spec.tie_preference)
         before = sweep.row_turns(points, [d["tie_set"]["search_pick"] for d in details])
         after = sweep.row_turns(points, picks)
         jobs += [(cell, pick, before, after, t, wall) for cell, pick, t, wall in zip(cells, picks, tried, walls)]

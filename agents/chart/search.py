@@ -22,9 +22,11 @@ nominal scene and over the variability model.
   rounds (fewer leaders where that leaves each point 2 rounds): each round scores every
   point on the same fresh samples (robust: a fresh set of draws).
 * Steady rows: the leaders whose mean re-scored score is within two standard errors (of
-  the best leader's mean, from the spread of its rounds) of the best are the cell's tie
-  set; the one closest to the narrower neighbour's settings (in the unit box) is the
-  search pick, where the next width starts. The row sweep (`agents.chart.sweep`) later
+  the best leader's mean, from the spread of its rounds) of the best, plus the spec's
+  steady tolerance, are the cell's tie set; the one with the lowest disc speed (in
+  `sweep.RPM_STEP` steps; the spec's `tie_preference`), then closest to the narrower
+  neighbour's settings (in the unit box), then the best scored, is the search pick, where
+  the next width starts. The row sweep (`agents.chart.sweep`) later
   picks one point of each tie set for the whole row. What the search believes
   (`cv_search_percent`, the CV of its objective) rests on the re-scores only.
 * `policy`: no search; the policy's proposal is the cell's settings.
@@ -50,7 +52,7 @@ import numpy as np
 from spreadgym.agents.baselines import CMA_SIGMA0, LEADERS, cmaes_search, leaders, split_budget
 from spreadgym.agents.chart import variability as var
 from spreadgym.agents.chart.spec import Cell, ChartSpec, cell_seed
-from spreadgym.agents.chart.sweep import SLICE_POINTS, SLICE_REFINE
+from spreadgym.agents.chart.sweep import SLICE_POINTS, SLICE_REFINE, speed_steps
 from spreadgym.agents.evaluation import WORST_CV_PERCENT
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import scene_with
@@ -170,8 +172,9 @@ def search(scorer: Scorer, x0: np.ndarray, sigma0: float, neighbour: Optional[np
     best_se = rounds_se(scores[best, :, 0])
     limit = tie_limit(float(means[best]), best_se, spec.steady_tolerance_pp)
     ties = [i for i in range(len(kept)) if means[i] <= limit]
-    pick = best if neighbour is None else min(ties, key=lambda i: (float(np.linalg.norm(kept[i] - neighbour)),
-                                                                   means[i]))
+    pick = min(ties, key=lambda i: (speed_steps(scorer.space.values(kept[i]), spec.tie_preference),
+                                    0.0 if neighbour is None else float(np.linalg.norm(kept[i] - neighbour)),
+                                    means[i], i))
     cv_se = [rounds_se(scores[i, :, 1]) for i in range(len(kept))]
     points = [tie_point(kept[i], float(means[i]), float(scores[i, :, 1].mean()), cv_se[i]) for i in ties]
     return {"x": kept[pick], "cv": float(scores[pick, :, 1].mean()), "cv_se": cv_se[pick],

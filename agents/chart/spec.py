@@ -34,7 +34,11 @@ MAX_BUDGET = 100_000  # simulations per cell: days of work already; beyond it on
 MAX_WIDTHS = 2000  # every multiple of the finest tray (0.05 m) up to 100 m
 MAX_WIDTH_M = 100.0
 MAX_STEADY_TOLERANCE_PP = 100.0  # a tolerance this wide ties every point of any chart cell
-MANIFEST_DEFAULTS = {"steady_tolerance_pp": 0.0}  # spec fields a manifest leaves out at these values
+STEADY_TOLERANCE_PP = 2.0  # the default tie: within 2 SE of a cell's best plus 2 pp (its price: docs/charts.md)
+TIE_PREFERENCES = ("lowest-rpm", "nearest")  # among tied points (sweep.py): the first is the default
+# What a manifest without the field meant (charts made before the field): a manifest leaves a field out at this
+# value, and an older chart folder or chart.json is read with it
+MANIFEST_DEFAULTS = {"steady_tolerance_pp": 0.0, "tie_preference": "nearest"}
 OBJECTIVES = ("robust", "nominal")  # robust: the search minimises the variability model's quantile
 METHODS = ("cmaes", "policy", "policy+search")
 
@@ -72,7 +76,8 @@ class ChartSpec:
     policy: Optional[str] = None  # the policy file (method policy, policy+search)
     policy_sha256: Optional[str] = None  # its content, so a changed policy is noticed on resume
     variability: dict = field(default_factory=check_variability)  # the checked variability model
-    steady_tolerance_pp: float = 0.0  # widens the tie test: within 2 SE of the best plus this many pp (sweep.py)
+    steady_tolerance_pp: float = STEADY_TOLERANCE_PP  # the tie test: within 2 SE of the best plus this many pp
+    tie_preference: str = TIE_PREFERENCES[0]  # which tied point a cell takes (sweep.py): lowest-rpm or nearest
 
     @property
     def cells(self) -> list[Cell]:
@@ -106,10 +111,16 @@ class ChartSpec:
         per_pass = REPAIR_CANDIDATES * split_budget(self.budget)[1] + axes * (SLICE_POINTS + len(SLICE_REFINE))
         return (self.budget + REPAIR_PASSES * per_pass) * self.draws + 2 * self.verify_simulations
 
+    @classmethod
+    def from_manifest(cls, manifest: dict) -> "ChartSpec":
+        """The spec a manifest (or chart.json's `spec`) records; a field it leaves out has its MANIFEST_DEFAULTS
+        value (what charts made before the field did)."""
+        fields = {**MANIFEST_DEFAULTS, **manifest}
+        return cls(**{k: tuple(v) if k in ("fertilizers", "widths_m") else v for k, v in fields.items()})
+
     def manifest(self) -> dict:
         """The spec as the chart folder and chart.json record it; a field of MANIFEST_DEFAULTS only away from
-        its default, so a chart of the default rule has the manifest it had before the option (and resumes as
-        it did)."""
+        that value, so a chart made before the field has the manifest it had (and resumes as it did)."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()
                 if k not in MANIFEST_DEFAULTS or v != MANIFEST_DEFAULTS[k]}
 
@@ -214,8 +225,8 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
               granules: Optional[int] = None, seed: int = 0, search_model: str = SEARCH_MODEL,
               verify_model: str = VERIFY_MODEL, verify_runs: int = VERIFY_RUNS, settings: Optional[dict] = None,
               objective: str = "robust", method: str = "cmaes", policy: Optional[str] = None, variability=None,
-              library: Optional[MaterialLibrary] = None,
-              steady_tolerance_pp: float = 0.0) -> tuple[ChartSpec, list[str]]:
+              library: Optional[MaterialLibrary] = None, steady_tolerance_pp: float = STEADY_TOLERANCE_PP,
+              tie_preference: str = TIE_PREFERENCES[0]) -> tuple[ChartSpec, list[str]]:
     """A checked ChartSpec and notes for people. Every problem is a SpreadgymError naming
     the flag or key: unknown fertilizer or model, width off the tray grid or beyond what
     the scene can throw, budget or granules below 1, settings ranges out of bounds, an
@@ -231,6 +242,8 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
         raise SpreadgymError(f"--policy: not used by --method {method}")
     variability = check_variability(variability)
     steady_tolerance_pp = check_steady_tolerance(steady_tolerance_pp)
+    if tie_preference not in TIE_PREFERENCES:
+        raise SpreadgymError(f"tie preference: {brief(tie_preference)}; allowed: {', '.join(TIE_PREFERENCES)}")
     base = load_scene(scene)
     if not 1 <= int(budget) <= MAX_BUDGET:
         raise SpreadgymError(f"--budget: {budget} is out of range; allowed [1, {MAX_BUDGET}] simulations")
@@ -260,7 +273,7 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
         names, notes = _policy_fertilizers(names, notes, fertilizers, policy, digest)
     spec = ChartSpec(base.model_dump(mode="json"), names, tuple(sorted(widths_m)), driving, int(budget), granules,
                      int(seed), search_model, verify_model, int(verify_runs), settings, objective, method, policy,
-                     digest, variability, steady_tolerance_pp)
+                     digest, variability, steady_tolerance_pp, tie_preference)
     try:
         scene = spec.cell_scene(spec.cells[0])
         check_pooled_work(scene, spec.verify_runs, "--granules")

@@ -11,11 +11,14 @@ Among all paths that take one tied point per cell, the sweep chooses, lexicograp
 1. the fewest reversals over the targets' sizes (`quality.RPM_REVERSAL` of the disc speed
    at the turning width, `quality.PITCH_REVERSAL_DEG` in any pitch): the figures
    `quality.row_reversals` reads off the finished chart;
-2. then the least movement along the row: the sum of the Euclidean steps between
+2. then (the spec's `tie_preference` "lowest-rpm", the default) the gentlest disc: the
+   lowest sum of the disc speeds in steps of `RPM_STEP` (speeds closer than a step are one
+   speed to this rule; "nearest", the rule of charts made before it, skips this step);
+3. then the least movement along the row: the sum of the Euclidean steps between
    neighbouring widths' points in the unit box of the settings;
-3. then the smallest sum of the points' score excesses over their cells' best (so a cell
+4. then the smallest sum of the points' score excesses over their cells' best (so a cell
    keeps its best when no tied point makes the row steadier);
-4. then the lowest indices (deterministic).
+5. then the lowest indices (deterministic).
 
 A reversal is a property of three neighbouring widths, so the dynamic programme (Viterbi)
 runs over pairs of neighbouring points: O(cells x points^3), a few hundred steps for a
@@ -53,6 +56,9 @@ REPAIR_PASSES = 3  # passes of candidates, each only while the last one lowered 
 REPAIR_CANDIDATES = 6  # most candidates of a cell in one pass (4 as a turning cell, 1 as each turn's neighbour)
 SLICE_POINTS = 9  # the steady slice's grid along each searched axis (ends included), then SLICE_REFINE around its best
 SLICE_REFINE = (-0.5, -0.25, 0.25, 0.5)  # in grid steps
+RPM_STEP = 10.0  # rpm: the tie preference's unit of disc speed (a dial's resolution; closer speeds are one speed)
+GENTLE_RULE = RULE.replace("reversals, then", f"reversals, then the lowest disc speeds (in {RPM_STEP:g} rpm steps), "
+                                              "then")
 
 
 def tolerance_text(tolerance_pp: float) -> str:
@@ -60,11 +66,19 @@ def tolerance_text(tolerance_pp: float) -> str:
     return "" if tolerance_pp == 0.0 else f" plus a steady tolerance of {tolerance_pp:g} pp of the objective"
 
 
-def rule(tolerance_pp: float = 0.0) -> str:
-    """The sweep's rule (RULE; the tie test widened by a non-zero steady tolerance)."""
+def rule(tolerance_pp: float = 0.0, preference: str = "nearest") -> str:
+    """The sweep's rule (RULE, or GENTLE_RULE with the lowest-rpm preference; the tie test widened by a non-zero
+    steady tolerance)."""
+    text = GENTLE_RULE if preference == "lowest-rpm" else RULE
     if tolerance_pp == 0.0:
-        return RULE
-    return RULE + f" (tied: within two standard errors of the cell's best{tolerance_text(tolerance_pp)})"
+        return text
+    return text + f" (tied: within two standard errors of the cell's best{tolerance_text(tolerance_pp)})"
+
+
+def speed_steps(values: dict, preference: str) -> int:
+    """The tie preference's disc-speed term of a point's dial values: its rpm in RPM_STEP steps ("lowest-rpm"),
+    or 0 ("nearest": the speed is not preferred)."""
+    return int(np.floor(values["rpm"] / RPM_STEP + 0.5)) if preference == "lowest-rpm" else 0
 
 
 def repair_rule(tolerance_pp: float = 0.0) -> str:
@@ -94,28 +108,30 @@ def step(a: Point, b: Point) -> float:
     return float(np.linalg.norm(np.subtract(a.unit, b.unit)))
 
 
-def _add(cost: tuple, reversals: int, movement: float, excess: float) -> tuple:
-    return cost[0] + reversals, cost[1] + movement, cost[2] + excess
+def _add(cost: tuple, reversals: int, speed: int, movement: float, excess: float) -> tuple:
+    return cost[0] + reversals, cost[1] + speed, cost[2] + movement, cost[3] + excess
 
 
-def steadiest(row: Sequence[Sequence[Point]]) -> list[int]:
-    """The index of the chosen point in each cell of `row` (cells in width order, each a non-empty list)."""
+def steadiest(row: Sequence[Sequence[Point]], preference: str = "lowest-rpm") -> list[int]:
+    """The index of the chosen point in each cell of `row` (cells in width order, each a non-empty list), by the
+    module's order (`preference`: the spec's `tie_preference`)."""
     if any(len(cell) == 0 for cell in row):
         raise ValueError("every cell needs at least one point")
     n = len(row)
     if n == 0:
         return []
+    speed = [[speed_steps(p.values, preference) for p in cell] for cell in row]
     if n == 1:
-        return [min(range(len(row[0])), key=lambda i: (row[0][i].excess, i))]
+        return [min(range(len(row[0])), key=lambda i: (speed[0][i], row[0][i].excess, i))]
     # cost[(a, b)]: the best cost of cells 0..k ending with point a at k-1 and point b at k; back[k][(a, b)]: cell k-2's
-    cost = {(a, b): (0, step(pa, pb), pa.excess + pb.excess)
+    cost = {(a, b): (0, speed[0][a] + speed[1][b], step(pa, pb), pa.excess + pb.excess)
             for a, pa in enumerate(row[0]) for b, pb in enumerate(row[1])}
     back: list[dict] = [{}, {}]
     for k in range(2, n):
         new, links = {}, {}
         for b, pb in enumerate(row[k - 1]):
             for c, pc in enumerate(row[k]):
-                options = [(_add(cost[(a, b)], turns(pa, pb, pc), step(pb, pc), pc.excess), a)
+                options = [(_add(cost[(a, b)], turns(pa, pb, pc), speed[k][c], step(pb, pc), pc.excess), a)
                            for a, pa in enumerate(row[k - 2])]
                 new[(b, c)], links[(b, c)] = min(options)
         cost = new
@@ -197,7 +213,8 @@ def start_of(candidate: dict) -> tuple:
 
 
 def repair(spaces: Sequence, widths: Sequence[float], tie_sets: Sequence[dict],
-           score: Callable[[dict], dict], passes: int = REPAIR_PASSES) -> list[list[dict]]:
+           score: Callable[[dict], dict], passes: int = REPAIR_PASSES,
+           preference: str = "lowest-rpm") -> list[list[dict]]:
     """The candidates each cell of a row was scored at (in order), each a tie point with `tied`, `source`
     and `pass`. `score({cell: [(unit settings, free axes or None), ...]})` returns {cell: [point, ...]} (a
     tie point with `tied`; where free axes are given, the best point of a search of them from the unit
@@ -205,7 +222,7 @@ def repair(spaces: Sequence, widths: Sequence[float], tie_sets: Sequence[dict],
     tried: list[list[dict]] = [[] for _ in tie_sets]
     for pass_ in range(passes):
         row = row_with(spaces, tie_sets, tried)
-        picks = steadiest(row)
+        picks = steadiest(row, preference)
         now = row_turns(row, picks)
         jobs: dict[int, list] = {}
         for k in turning(row, picks):
@@ -221,18 +238,18 @@ def repair(spaces: Sequence, widths: Sequence[float], tie_sets: Sequence[dict],
             tried[j] += [{**point, "source": source, "pass": pass_}
                          for point, (_, source, _) in zip(found[j], jobs[j])]
         row = row_with(spaces, tie_sets, tried)
-        if row_turns(row, steadiest(row)) >= now:
+        if row_turns(row, steadiest(row, preference)) >= now:
             break
     return tried
 
 
 def sweep_block(tie: dict, pick: int, search_pick_verified: Optional[dict], before: int, after: int,
-                repair_block: dict, tolerance_pp: float = 0.0) -> dict:
+                repair_block: dict, tolerance_pp: float = 0.0, preference: str = "nearest") -> dict:
     """What the sweep did to a cell (`detail["sweep"]`): its pick among its points (`points_of`), whether
     that moved the cell off the search's pick, the search pick's own verification when it did, the row's
     reversals over the targets' sizes along the search's picks and along the sweep's, and the repair's
     candidates of the cell."""
-    return {"rule": rule(tolerance_pp), "pick": pick, "moved": pick != tie["search_pick"],
+    return {"rule": rule(tolerance_pp, preference), "pick": pick, "moved": pick != tie["search_pick"],
             "at_best": pick == tie["best"],
             "row_reversals_search": before, "row_reversals_swept": after,
             "search_pick_verified": search_pick_verified, "repair": repair_block}
@@ -277,7 +294,7 @@ def swept_record(spec, cell, record: dict, pick: int, before: int, after: int, c
         kept = verified_figures(row)
     repaired = repair_block(spec, detail, list(candidates))
     block = sweep_block(tie, pick, kept if pick != tie["search_pick"] else None, before, after, repaired,
-                        spec.steady_tolerance_pp)
+                        spec.steady_tolerance_pp, spec.tie_preference)
     simulations = (detail["search_evaluations"] * spec.draws + repaired["simulations"]
                    + spec.verify_simulations * (1 if pick == tie["search_pick"] else 2))
     if detail["unit_settings"] == point["unit_settings"]:
@@ -289,3 +306,43 @@ def swept_record(spec, cell, record: dict, pick: int, before: int, after: int, c
     return verified_record(spec, cell, np.asarray(point["unit_settings"], dtype=float), point["cv_search_percent"],
                            point["cv_search_standard_error_percent"], simulations - spec.verify_simulations, base,
                            time.perf_counter() - row["wall_s"] - repair_wall_s)
+
+
+def reversal_prices(spec, records: Sequence[dict]) -> list[dict]:
+    """Every reversal over the targets' sizes left in the finished rows of `records` (spec order), with its price:
+    the least a scored point of the turning cell or of a neighbour (its tie set or any repair candidate, tied or
+    not) that leaves no turn there would add to that cell's score over the point it has (percentage points of the
+    objective on the cell's own re-score rounds; None where no scored point removes it, e.g. cells never
+    re-scored). The turn is priced where it is: a replacement may move a turn to the next width."""
+    from spreadgym.agents.chart.spec import Cell
+
+    out = []
+    for fertilizer in spec.fertilizers:
+        mine = [r for r in records if r["row"]["fertilizer"] == fertilizer]
+        if len(mine) < 3:
+            continue
+        details = [r["detail"] for r in mine]
+        spaces = [spec.space(spec.cell_scene(Cell(fertilizer, r["row"]["width_m"]))) for r in mine]
+        scored = row_points(spaces, [{**d["tie_set"], "points": list(d["tie_set"]["points"]) + candidates_of(d)}
+                                     for d in details])
+        chosen = [next((p for p in cell if list(p.unit) == d["unit_settings"]),
+                       Point(tuple(d["unit_settings"]), space.values(d["unit_settings"]), 0.0))
+                  for cell, d, space in zip(scored, details, spaces)]
+        for k in range(1, len(mine) - 1):
+            here = chosen[k - 1:k + 2]
+            if not turns(*here):
+                continue
+            prices = []
+            for j in range(3):
+                for alternative in scored[k - 1 + j]:
+                    trial = [alternative if i == j else p for i, p in enumerate(here)]
+                    if not turns(*trial):
+                        prices.append((alternative.excess - here[j].excess, mine[k - 1 + j]["row"]["width_m"]))
+            price = min(prices) if prices else None
+            axes = turning_axes(*here)
+            out.append({"fertilizer": fertilizer, "width_m": mine[k]["row"]["width_m"],
+                        "settings": [list(here[1].values)[i] for i in axes],
+                        "values": [[p.values[list(here[1].values)[i]] for p in here] for i in axes],
+                        "price_pp": None if price is None else max(0.0, price[0]),
+                        "priced_at_width_m": None if price is None else price[1]})
+    return out

@@ -15,7 +15,14 @@ DRIVING = ("racetrack", "back-and-forth")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
-    from spreadgym.agents.chart.spec import MAX_BUDGET, MAX_STEADY_TOLERANCE_PP, METHODS, OBJECTIVES, VERIFY_MODEL
+    from spreadgym.agents.chart.spec import (
+        MAX_BUDGET,
+        MAX_STEADY_TOLERANCE_PP,
+        METHODS,
+        OBJECTIVES,
+        STEADY_TOLERANCE_PP,
+        VERIFY_MODEL,
+    )
     from spreadgym.physics.selection import MODELS
 
     parser.add_argument("--scene", required=True, metavar="S", help="shipped scene name or a YAML path")
@@ -56,12 +63,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--variability", metavar="FILE",
                         help="a YAML file with a 'variability:' section over the defaults "
                              "(configs/chart_variability.yaml)")
-    parser.add_argument("--steady-tolerance-pp", type=arguments.real(0.0, MAX_STEADY_TOLERANCE_PP), default=0.0,
-                        metavar="X",
+    parser.add_argument("--steady-tolerance-pp", type=arguments.real(0.0, MAX_STEADY_TOLERANCE_PP),
+                        default=STEADY_TOLERANCE_PP, metavar="X",
                         help="steady rows: a point ties with a cell's best when its mean score is within two "
-                             "standard errors of it plus X percentage points of the objective; a wider tie set "
-                             "lets the row sweep remove reversals at a price in CV (docs/charts.md; default 0: "
-                             "the two-standard-error rule)")
+                             "standard errors of it plus X percentage points of the objective; among tied points "
+                             "the lowest disc speed, then the smallest change from the neighbours; a wider tie set "
+                             f"removes reversals at a price in CV (docs/charts.md; default {STEADY_TOLERANCE_PP:g}; "
+                             "0: the two-standard-error rule)")
     arguments.force_flag(parser)
     parser.add_argument("--json", action="store_true", help="print chart.json on stdout")
 

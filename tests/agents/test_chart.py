@@ -116,7 +116,8 @@ def test_interrupted_chart_keeps_finished_cells_and_resumes_without_redoing_them
     ({"budget": 7}, "budget 6 -> 7"),
     ({"driving": "back-and-forth"}, "driving 'racetrack' -> 'back-and-forth'"),
     ({"widths": "3,4,5"}, "widths_m"),
-    ({"steady_tolerance_pp": 1.5}, "steady_tolerance_pp 0.0 -> 1.5"),
+    ({"steady_tolerance_pp": 1.5}, "steady_tolerance_pp 2.0 -> 1.5"),
+    ({"tie_preference": "nearest"}, "tie_preference 'lowest-rpm' -> 'nearest'"),
 ])
 def test_a_changed_flag_is_refused_not_mixed(chart, changes, message):
     out, _ = chart

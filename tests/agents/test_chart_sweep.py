@@ -19,6 +19,7 @@ from spreadgym.agents.chart.sweep import (
     repair,
     row_points,
     row_turns,
+    speed_steps,
     steadiest,
     step,
     swept_record,
@@ -37,10 +38,13 @@ def movement(row, picks):
     return sum(step(row[k - 1][picks[k - 1]], row[k][picks[k]]) for k in range(1, len(row)))
 
 
-def brute_force(row):
-    """The lexicographic minimum (reversals, movement, excess, indices) over every path."""
+def brute_force(row, preference="lowest-rpm"):
+    """The lexicographic minimum (reversals, disc speeds in RPM_STEP steps with the lowest-rpm preference,
+    movement, excess, indices) over every path."""
     def key(path):
-        return (row_turns(row, path), movement(row, path), sum(row[k][i].excess for k, i in enumerate(path)), path)
+        speed = sum(speed_steps(row[k][i].values, preference) for k, i in enumerate(path))
+        return (row_turns(row, path), speed, movement(row, path), sum(row[k][i].excess for k, i in enumerate(path)),
+                path)
 
     return list(min(itertools.product(*[range(len(cell)) for cell in row]), key=key))
 
@@ -94,26 +98,30 @@ def test_a_row_without_ties_keeps_its_best_and_a_lone_cell_its_best():
         steadiest([[point(800, 0)], []])
 
 
+@pytest.mark.parametrize("preference", ["lowest-rpm", "nearest"])
 @pytest.mark.parametrize("seed", range(12))
-def test_the_dynamic_programme_finds_the_brute_force_optimum(seed):
+def test_the_dynamic_programme_finds_the_brute_force_optimum(seed, preference):
     rng = np.random.default_rng(seed)
-    row = [[point(rng.uniform(400, 1100), rng.uniform(-20, 20), 0.0 if i == 0 else rng.uniform(0, 1))
+    # rpm on a 20 rpm grid, so that disc speeds tie often and the later terms decide too
+    row = [[point(20 * rng.integers(20, 56), rng.uniform(-20, 20), 0.0 if i == 0 else rng.uniform(0, 1))
             for i in range(rng.integers(1, 4))] for _ in range(rng.integers(2, 7))]
-    picks = steadiest(row)
-    assert picks == brute_force(row)
-    assert steadiest(row) == picks  # the same tie sets, the same picks
+    picks = steadiest(row, preference)
+    assert picks == brute_force(row, preference)
+    assert steadiest(row, preference) == picks  # the same tie sets, the same picks
 
 
 SMALL = dict(budget=24, granules=64, search_model="analytic", verify_runs=2,
              variability={"draws": 4, "verify_draws": 4})
+OLD_RULE = dict(steady_tolerance_pp=0.0, tie_preference="nearest")  # the rule before issue 45 (two SE, nearest)
 
 
 @pytest.fixture(scope="module")
 def chart(tmp_path_factory):
-    """Two widths whose sweep moves the 3 m cell off its search pick (seed 1: the 3 m cell ties 3 points, the
-    3.5 m cell 1; the tied point nearest the 3.5 m settings makes the row's step smaller)."""
+    """Two widths whose sweep moves the 3 m cell off its search pick (seed 1, the rule before issue 45: the 3 m
+    cell ties 3 points, the 3.5 m cell 1; the tied point nearest the 3.5 m settings makes the row's step
+    smaller)."""
     out = tmp_path_factory.mktemp("chart")
-    spec = make_spec("paper", FERTILIZER, "3,3.5", seed=1, **SMALL)[0]
+    spec = make_spec("paper", FERTILIZER, "3,3.5", seed=1, **SMALL, **OLD_RULE)[0]
     return spec, out, run_chart(spec, out, engine="local", progress=False)
 
 
@@ -320,7 +328,7 @@ def repaired(tmp_path_factory):
         return [{**p, "tied": True} for p in points], wall
 
     out = tmp_path_factory.mktemp("repaired")
-    spec = make_spec("paper", FERTILIZER, "3:6:0.5", seed=2, **{**SMALL, "verify_model": "analytic"})[0]
+    spec = make_spec("paper", FERTILIZER, "3:6:0.5", seed=2, **{**SMALL, "verify_model": "analytic"}, **OLD_RULE)[0]
     patch = pytest.MonkeyPatch()
     patch.setattr(runner, "score_candidates", all_tied)
     patch.setattr(quality, "RPM_REVERSAL", 0.0)
@@ -396,7 +404,7 @@ def test_the_repair_gives_the_same_chart_on_ray_as_in_process(tmp_path, monkeypa
 
     monkeypatch.setattr(quality, "RPM_REVERSAL", 0.0)
     monkeypatch.setattr(quality, "PITCH_REVERSAL_DEG", 0.0)
-    spec = make_spec("paper", FERTILIZER, "3:6:0.5", seed=2, **{**SMALL, "verify_model": "analytic"})[0]
+    spec = make_spec("paper", FERTILIZER, "3:6:0.5", seed=2, **{**SMALL, "verify_model": "analytic"}, **OLD_RULE)[0]
     here = run_chart(spec, tmp_path / "here", engine="local", progress=False)
     on_ray = run_chart(spec, tmp_path / "ray", engine="ray", workers=1, progress=False)
 
@@ -497,7 +505,8 @@ def test_a_chart_with_a_steady_tolerance_records_it_and_resumes_only_with_it(tmp
     from spreadgym.agents.chart.outputs import markdown
     from spreadgym.errors import SpreadgymError
 
-    spec = make_spec("paper", FERTILIZER, "3,3.5", seed=1, steady_tolerance_pp=0.5, **SMALL)[0]
+    spec = make_spec("paper", FERTILIZER, "3,3.5", seed=1, steady_tolerance_pp=0.5, tie_preference="nearest",
+                     **SMALL)[0]
     result = run_chart(spec, tmp_path, engine="local", progress=False)
     assert result.payload["spec"]["steady_tolerance_pp"] == 0.5
     assert json.loads((tmp_path / "manifest.json").read_text())["steady_tolerance_pp"] == 0.5
@@ -507,7 +516,82 @@ def test_a_chart_with_a_steady_tolerance_records_it_and_resumes_only_with_it(tmp
     assert "plus 0.5 pp (--steady-tolerance-pp)" in (tmp_path / "chart.html").read_text(encoding="utf-8")
     again = run_chart(spec, tmp_path, engine="local", progress=False)
     assert again.computed == [] and again.payload["rows"] == result.payload["rows"]
-    default = make_spec("paper", FERTILIZER, "3,3.5", seed=1, **SMALL)[0]
-    assert "steady_tolerance_pp" not in default.manifest()
+    old = make_spec("paper", FERTILIZER, "3,3.5", seed=1, **SMALL, **OLD_RULE)[0]
+    assert "steady_tolerance_pp" not in old.manifest() and "tie_preference" not in old.manifest()
     with pytest.raises(SpreadgymError, match="steady_tolerance_pp 0.5 -> 0.0"):
+        run_chart(old, tmp_path, engine="local", progress=False)
+    default = make_spec("paper", FERTILIZER, "3,3.5", seed=1, **SMALL)[0]
+    assert default.manifest()["steady_tolerance_pp"] == 2.0 and default.manifest()["tie_preference"] == "lowest-rpm"
+    with pytest.raises(SpreadgymError, match="steady_tolerance_pp 0.5 -> 2.0"):
         run_chart(default, tmp_path, engine="local", progress=False)
+
+
+def test_among_tied_points_the_sweep_prefers_the_lowest_disc_speed_then_the_smallest_change():
+    # every cell ties a fast point near its neighbours and a gentler one: the rule takes the gentler row even
+    # though it moves more; the old rule ("nearest") keeps the row that moves least
+    row = [[point(1100, 10), point(700, 20, 0.5)],
+           [point(1100, 11), point(720, 22, 0.5)],
+           [point(1100, 12), point(740, 24, 0.5)]]
+    assert steadiest(row) == [1, 1, 1]
+    assert steadiest(row, "nearest") == [0, 0, 0]
+    # disc speeds within one RPM_STEP are one speed: the smallest change from the neighbours decides
+    row = [[point(800, 10)], [point(804, 25), point(801, 11, 0.3)], [point(800, 12)]]
+    assert speed_steps(row[1][0].values, "lowest-rpm") == speed_steps(row[1][1].values, "lowest-rpm")
+    assert steadiest(row) == [0, 1, 0]
+    # steady rows come first: a lower speed that turns the row is not taken
+    row = [[point(900, 10)], [point(1000, 10), point(600, 10, 0.1)], [point(1100, 10)]]
+    assert steadiest(row) == [0, 0, 0] and row_turns(row, [0, 1, 0]) == 1
+
+
+def test_the_chains_pick_is_the_tied_point_with_the_lowest_disc_speed(chart):
+    """A cell's search pick (where the next width starts) under the default preference: the lowest disc speed
+    among its tied points, then the nearest to the neighbour."""
+    from dataclasses import replace
+
+    from spreadgym.agents.chart.search import run_cell
+
+    spec, out, _ = chart
+    cell = spec.cells[0]
+    wide = run_cell(replace(spec, steady_tolerance_pp=100.0, tie_preference="lowest-rpm"), cell, None)["detail"]
+    space = spec.space(spec.cell_scene(cell))
+    speeds = [space.values(p["unit_settings"])["rpm"] for p in wide["tie_set"]["points"]]
+    assert len(speeds) >= 2 and len(set(speeds)) == len(speeds)
+    assert speeds[wide["tie_set"]["search_pick"]] == min(speeds)
+    assert wide["search_unit_settings"] == wide["tie_set"]["points"][wide["tie_set"]["search_pick"]]["unit_settings"]
+
+
+def _record(fertilizer, width, rpm, pitch, scored):
+    """A finished cell's record for `reversal_prices`: its point (rpm, pitch) and the other scored points
+    (rpm, pitch, score excess over the best, tied), in the box of `point`."""
+    unit = list(point(rpm, pitch).unit)
+    points = [{"unit_settings": unit, "score_percent": 1.0, "cv_search_percent": 1.0,
+               "cv_search_standard_error_percent": 0.1}]
+    candidates = [{"unit_settings": list(point(r, p).unit), "score_percent": 1.0 + e, "cv_search_percent": 1.0 + e,
+                   "cv_search_standard_error_percent": 0.1, "tied": t} for r, p, e, t in scored]
+    return {"row": {"fertilizer": fertilizer, "width_m": width, "rpm": rpm, "pitch_deg": pitch},
+            "detail": {"unit_settings": unit, "tie_set": {"points": points, "best": 0, "search_pick": 0,
+                                                           "best_standard_error_percent": 0.1},
+                       "sweep": {"repair": {"candidates": candidates}}}}
+
+
+def test_a_remaining_reversal_is_priced_by_the_cheapest_scored_point_that_removes_it():
+    from types import SimpleNamespace
+
+    from spreadgym.agents.chart.sweep import reversal_prices
+
+    spec = SimpleNamespace(fertilizers=("f",), space=lambda scene: _Space, cell_scene=lambda cell: None)
+    records = [_record("f", 3.0, 800, 10, []),
+               _record("f", 3.5, 1000, 10, [(820, 10, 3.4, False), (860, 10, 2.6, False), (1200, 10, 0.1, True)]),
+               _record("f", 4.0, 850, 10, [(1000, 10, 4.0, False)]),
+               _record("f", 4.5, 800, 10, [])]
+    (found,) = reversal_prices(spec, records)
+    # 3.5 m turns (800 -> 1000 -> 850: 15 %); 860 rpm there removes it for +2.6 pp, 820 for +3.4, 4 m at 1000 for +4
+    assert found["width_m"] == 3.5 and found["settings"] == ["rpm"]
+    assert found["values"] == [[800.0, 1000.0, 850.0]]
+    assert found["price_pp"] == pytest.approx(2.6) and found["priced_at_width_m"] == 3.5
+    # with nothing scored that removes it, the reversal is flagged without a price
+    bare = [_record("f", 3.0, 800, 10, []), _record("f", 3.5, 1000, 10, []), _record("f", 4.0, 850, 10, [])]
+    (unpriced,) = reversal_prices(spec, bare)
+    assert unpriced["price_pp"] is None
+    steady = [_record("f", 3.0, 800, 10, []), _record("f", 3.5, 820, 10, []), _record("f", 4.0, 850, 10, [])]
+    assert reversal_prices(spec, steady) == []
