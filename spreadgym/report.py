@@ -90,19 +90,39 @@ def machine_lines(scene) -> list[tuple[str, str]]:
     return lines
 
 
+SETTING_LABELS = {"spinner.rpm": "disc speed", "vanes.pitch_deg": "vane pitch", "feed.radius_m": "drop radius",
+                  "feed.angle_deg": "drop angle", "pattern.target_swath_m": "working width", "pattern.driving": "driving"}
+
+
+def setting_label(key: str) -> str:
+    """A dialled setting's name in a record's words ('vanes.pitch_deg.2' is 'vane 2 pitch')."""
+    parts = key.split(".")
+    if parts[0] == "deflectors":
+        return f"plate {parts[1]} angle"
+    if key.startswith("vanes.pitch_deg."):
+        return f"vane {parts[-1]} pitch"
+    return SETTING_LABELS.get(key, key)
+
+
+def setting_text(key: str, value) -> str:
+    """A dialled setting's value as an operator dials it: whole rpm, tenths of a degree, millimetres."""
+    if key == "spinner.rpm":
+        return f"{value:.0f} rpm"
+    if key.endswith("_deg") or ".pitch_deg." in key:
+        return f"{value:.1f}°"
+    if key == "feed.radius_m":
+        return f"{1000 * value:.0f} mm"
+    return f"{value:g} m" if key.endswith("_m") else str(value)
+
+
 def setting_lines(scene) -> list[tuple[str, str, str]]:
     """Every setting an operator dials on the scene's machine (scene key, label, value): disc speed, vane pitch
     (one per vane where the scene gives one per vane), drop point, each plate's angle, working width and driving."""
     pitch = scene.vanes.pitch_deg
-    lines = [("spinner.rpm", "disc speed", f"{scene.spinner.rpm:.0f} rpm")]
-    if isinstance(pitch, list):
-        lines += [(f"vanes.pitch_deg.{k}", f"vane {k} pitch", f"{p:.1f}°") for k, p in enumerate(pitch)]
-    else:
-        lines.append(("vanes.pitch_deg", "vane pitch", f"{pitch:.1f}°"))
-    lines += [("feed.radius_m", "drop radius", f"{1000 * scene.feed.radius_m:.0f} mm"),
-              ("feed.angle_deg", "drop angle", f"{scene.feed.angle_deg:.1f}°")]
-    lines += [(f"deflectors.{i}.angle_deg", f"plate {i} angle", f"{plate.angle_deg:.1f}°")
-              for i, plate in enumerate(scene.deflectors)]
-    lines += [("pattern.target_swath_m", "working width", f"{scene.pattern.target_swath_m:g} m"),
-              ("pattern.driving", "driving", scene.pattern.driving)]
-    return lines
+    pitches = [(f"vanes.pitch_deg.{k}", p) for k, p in enumerate(pitch)] if isinstance(pitch, list) else \
+        [("vanes.pitch_deg", pitch)]
+    values = [("spinner.rpm", scene.spinner.rpm), *pitches, ("feed.radius_m", scene.feed.radius_m),
+              ("feed.angle_deg", scene.feed.angle_deg),
+              *[(f"deflectors.{i}.angle_deg", plate.angle_deg) for i, plate in enumerate(scene.deflectors)],
+              ("pattern.target_swath_m", scene.pattern.target_swath_m), ("pattern.driving", scene.pattern.driving)]
+    return [(key, setting_label(key), setting_text(key, value)) for key, value in values]

@@ -29,6 +29,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("spreadgym.agents.commands.demo",
              "the main job: better spinner settings for a wider swath (CMA-ES on the fast model, "
              "before/after with the full model), table and pictures"),
+    "advise": ("spreadgym.agents.commands.advise",
+               "after a tray test: what to change on the machine for an even spread at the working width wanted"),
     "chart": ("spreadgym.agents.commands.chart", "spreading chart: settings per fertilizer and width, verified (Ray)"),
     "bench": ("spreadgym.agents.commands.bench",
               "run the benchmarks (speed, speed against accuracy) and write CSV/PNG under --out"),

@@ -41,6 +41,13 @@ DEG = math.pi / 180.0
 PLATE_CHECK_POINTS = 73  # angles of a plate's range checked against the disc (every 1/72 of the range)
 
 
+def dialled(name: str, value: float) -> float:
+    """A setting's value as an operator dials it, by the unit in its name: whole rpm, tenths of a degree,
+    millimetres (what charts and advice print)."""
+    decimals = 0 if name == "rpm" else 1 if name.endswith("_deg") else 3
+    return round(float(value), decimals)
+
+
 @dataclass(frozen=True)
 class Axis:
     """One setting: its name (unit in the name), the scene key it sets and its SI bounds."""
@@ -177,6 +184,11 @@ class SettingsSpace:
     def scene_unit(self, scene: Scene) -> np.ndarray:
         """The unit vector of the scene's own settings (clipped into the box; a shared
         pitch axis takes the vanes' mean pitch)."""
+        return self.named_unit(self.scene_values(scene))
+
+    def scene_values(self, scene: Scene) -> list[float]:
+        """The scene's own settings on the axes, in the units of the names (rpm, deg, m), as the scene has
+        them (not clipped into the box; a shared pitch axis takes the vanes' mean pitch)."""
         pitches = [float(p) for p in scene.vanes.per_vane("pitch_deg")]
         values = []
         for axis in self.axes:
@@ -190,7 +202,7 @@ class SettingsSpace:
                 values.append(scene.feed.radius_m)
             else:
                 values.append(scene.feed.angle_deg)
-        return self.named_unit(values)
+        return [float(v) for v in values]
 
 
 def _check_plate_clear(scene: Scene, index: int, lo_deg: float, hi_deg: float) -> None:

@@ -1,0 +1,7 @@
+"""What to change after a tray test (`spreadgym advise`): the fit of the material to the test, the chart's
+robust settings search on the fitted model, and the expected CV before and after (`run`); how good the advice
+is, on synthetic tray tests against the full model (`bench`)."""
+
+from spreadgym.agents.advise.run import Advice, advise, advice_payload
+
+__all__ = ["Advice", "advise", "advice_payload"]
