@@ -91,7 +91,8 @@ def machine_lines(scene) -> list[tuple[str, str]]:
 
 
 SETTING_LABELS = {"spinner.rpm": "disc speed", "vanes.pitch_deg": "vane pitch", "feed.radius_m": "drop radius",
-                  "feed.angle_deg": "drop angle", "pattern.target_swath_m": "working width", "pattern.driving": "driving"}
+                  "feed.angle_deg": "drop angle", "pattern.target_swath_m": "working width",
+                  "pattern.driving": "driving"}
 
 
 def setting_label(key: str) -> str:

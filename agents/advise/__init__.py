@@ -2,6 +2,6 @@
 robust settings search on the fitted model, and the expected CV before and after (`run`); how good the advice
 is, on synthetic tray tests against the full model (`bench`)."""
 
-from spreadgym.agents.advise.run import Advice, advise, advice_payload
+from spreadgym.agents.advise.run import Advice, advice_payload, advise
 
 __all__ = ["Advice", "advise", "advice_payload"]
