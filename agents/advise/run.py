@@ -6,8 +6,12 @@
 2. **Search** the settings on the fitted scene at the working width wanted, with the
    robust objective of the spreading chart (`agents.chart.search`: the same `Scorer`, the
    same CMA-ES and re-score rounds, the p90 CV over the variability model's batches). The
-   search starts at the tested settings, and the tested settings are re-scored beside the
-   search's leaders in every round (they are the cell's "neighbour"); the advice is the
+   search starts at the best of a screen of the settings box (`SCREEN_POINTS` scrambled
+   Sobol points and the tested settings, on the search's batches: the optimum of a cell
+   moves between regimes of the settings, fast disc and little pitch or slower disc and
+   more, and a search started in the wrong one stays there), and the tested settings are
+   re-scored beside the search's leaders in every round (they are the cell's
+   "neighbour"); the advice is the
    point nearest the tested settings among those within two standard errors of the best
    (the chart's tie rule, no steady tolerance, the "nearest" preference): settings that
    are not measurably better leave the machine as it was.
@@ -30,9 +34,9 @@ from dataclasses import dataclass, field
 from typing import Callable, Optional, Sequence
 
 import numpy as np
+from scipy.stats import qmc
 
-from spreadgym.agents.baselines import CMA_SIGMA0
-from spreadgym.agents.chart.search import CMA_SEED_RANGE, Scorer, search
+from spreadgym.agents.chart.search import CMA_SEED_RANGE, WARM_SIGMA, Scorer, search
 from spreadgym.agents.chart.spec import MAX_WIDTH_M, Cell, ChartSpec, cell_seed
 from spreadgym.agents.chart.variability import check_variability
 from spreadgym.config.scene import Scene, bout_trays, scene_with
@@ -49,6 +53,7 @@ DEFAULT_FIT = ("contact.vane_friction=0.2:0.8", "contact.vane_restitution=0.2:0.
 """What a tray test tells about the material: the vane contact and the flight (docs/advise.md)."""
 ADVICE_BUDGET = 200  # candidates of the settings search, the chart's default
 ADVICE_GRANULES = 2048  # granules per candidate run, the chart's default (the shipped scenes' own)
+SCREEN_POINTS = 32  # a scrambled Sobol screen of the settings box before the search, so it starts in the best basin
 
 
 @dataclass
@@ -138,8 +143,11 @@ def advise(scene: Scene, test: TrayTest, width_m: float, fit: Sequence[str] = DE
     scorer_seq, cma_seq, *_ = cell_seed(seed, cell).spawn(5)
     scorer = Scorer(spec, cell, scorer_seq)
     tested_unit = scorer.space.scene_unit(scorer.scene)
-    say(f"searching the settings at {width_m:g} m ({budget} candidates)")
-    found = search(scorer, tested_unit, CMA_SIGMA0, tested_unit, int(cma_seq.generate_state(1)[0]) % CMA_SEED_RANGE)
+    say(f"searching the settings at {width_m:g} m ({SCREEN_POINTS} screened, {budget} candidates)")
+    screen = [tested_unit, *(2.0 * qmc.Sobol(scorer.space.size, scramble=True, seed=seed).random(SCREEN_POINTS) - 1.0)]
+    costs = [cost for cost, _ in scorer.score_many(screen, scorer.search_draws)]
+    start = screen[int(np.argmin(costs))]
+    found = search(scorer, start, WARM_SIGMA, tested_unit, int(cma_seq.generate_state(1)[0]) % CMA_SEED_RANGE)
     tested = tested_settings(scorer.space, scene)
     advised = settings_of(scorer.space, found["x"])
     if np.array_equal(found["x"], tested_unit):
@@ -213,7 +221,7 @@ def instruction(changes: dict, width_m: float, before, after) -> str:
                 f"(expected CV {_cv_text(before)}).")
     phrases = change_phrases(changes)
     listed = phrases[0] if len(phrases) == 1 else ", ".join(phrases[:-1]) + " and " + phrases[-1]
-    return (f"Set the {listed}: expected CV at {width_m:g} m {_cv_text(after)} instead of "
+    return (f"Set {listed}: expected CV at {width_m:g} m {_cv_text(after)} instead of "
             f"{_cv_text(before)}.")
 
 
