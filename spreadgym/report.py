@@ -127,3 +127,20 @@ def setting_lines(scene) -> list[tuple[str, str, str]]:
               *[(f"deflectors.{i}.angle_deg", plate.angle_deg) for i, plate in enumerate(scene.deflectors)],
               ("pattern.target_swath_m", scene.pattern.target_swath_m), ("pattern.driving", scene.pattern.driving)]
     return [(key, setting_label(key), setting_text(key, value)) for key, value in values]
+
+
+def swath_text(metrics: dict) -> str:
+    """The effective swath of simulate's JSON in words that do not read as good news when it is not: none where
+    no width of two trays or more stays under the threshold (one tray always does: its CV is 0), and a warning
+    where the CV at the working width is over the threshold though a wider width dips under it again."""
+    swath, width = metrics["effective_swath_m"], metrics["target_swath_m"]
+    threshold, cv = metrics["cv_threshold_percent"], metrics["cv_percent_at_target"]
+    if swath < 2 * metrics["tray_width_m"] - 1e-9:
+        return f"none: no working width of two trays or more stays under {threshold:g} %"
+    if cv is None or cv > threshold:
+        at = "nothing landed" if cv is None else f"the CV is {cv:.1f} %"
+        if swath > width:
+            return (f"not at {width:g} m: {at} there, over {threshold:g} % (the CV dips under it again at "
+                    f"{swath:g} m, a wider width)")
+        return f"{swath:g} m, narrower than the {width:g} m working width ({at} there, over {threshold:g} %)"
+    return f"{swath:g} m (CV <= {threshold:g} % up to it)"

@@ -216,9 +216,10 @@ def create_app(charts_dir: Path = Path("out/charts"), addresses: Addresses = LOO
 
     @app.get("/api/scenes")
     def scenes():
+        from spreadgym import __version__
         from spreadgym.config.resources import available
 
-        return {"scenes": available("scenes"), "precise": pattern.PRECISE}
+        return {"scenes": available("scenes"), "precise": pattern.PRECISE, "version": __version__}
 
     @app.post("/api/scene")
     def scene(request: pattern.SimulateRequest):

@@ -25,7 +25,7 @@ from spreadgym.config.resources import YamlLimitError, available, parse_yaml
 from spreadgym.config.scene import Scene, load_scene, scene_from_dict, scene_with
 from spreadgym.config.settings import SettingsSpace
 from spreadgym.errors import ConfigError, SpreadgymError
-from spreadgym.report import print_json, with_error
+from spreadgym.report import print_json, swath_text, with_error
 from spreadgym.spread.precision import (
     REFERENCE_MAX_RUNS,
     REFERENCE_PRECISION_PP,
@@ -168,11 +168,14 @@ def _current(scene: Scene, key: str) -> float:
 
 
 def scene_info(scene: Scene) -> dict:
-    """What the page needs to lay out a scene's controls."""
+    """What the page needs to lay out a scene's controls: the fertilizers offered are those that can run on it
+    (their surface pairs measured or set by the scene: what `spreadgym chart --fertilizers all` takes)."""
+    from spreadgym.agents.chart.spec import resolve_fertilizers
     from spreadgym.config.materials import load_library
 
+    runnable, _left_out = resolve_fertilizers("all", scene, load_library())
     return {"name": scene.name, "description": scene.description, "fertilizer": scene.fertilizer_name,
-            "fertilizers": sorted(load_library().fertilizers), "controls": controls(scene),
+            "fertilizers": sorted(set(runnable) | {scene.fertilizer_name}), "controls": controls(scene),
             "tray_width_m": scene.pattern.tray_width_m}
 
 
@@ -235,4 +238,5 @@ def pattern_payload(request: SimulateRequest, check: Optional[Callable[[], None]
     metrics = json.loads(json_text(precise.to_json()))
     cv, se = metrics["cv_percent_at_target"], metrics["cv_standard_error_percent"]
     cv_text = "nothing landed" if cv is None else with_error(cv, se, "%")
-    return json.dumps({"metrics": metrics, "cv_text": cv_text, "plot": plot_data(scene, precise)})
+    return json.dumps({"metrics": metrics, "cv_text": cv_text, "swath_text": swath_text(metrics),
+                       "plot": plot_data(scene, precise)})

@@ -12,7 +12,7 @@ import sys
 
 from spreadgym.cli import arguments
 from spreadgym.config.overrides import parse_assignments
-from spreadgym.report import format_table, print_json, with_error
+from spreadgym.report import format_table, print_json, swath_text, with_error
 from spreadgym.spread.precision import SIMULATE_MAX_RUNS, SIMULATE_PRECISION_PP, check_precision
 
 MAX_RUNS_LIMIT = 4096
@@ -115,7 +115,7 @@ def summary(m: dict, scene_name: str) -> str:
         ("CV at target", "nothing landed" if cv is None else
          f"{with_error(cv, se, '%')} at {m['target_swath_m']:g} m ({m['driving']})"),
         ("precision", precision),
-        ("effective swath", f"{m['effective_swath_m']:g} m (CV <= {m['cv_threshold_percent']:g} %)"),
+        ("effective swath", swath_text(m)),
         ("mass", f"released {1e3 * mass['released_kg']:.2f} g, landed {1e3 * mass['landed_kg']:.2f} g, "
                  f"retained {1e3 * mass['retained_kg']:.2f} g"
                  + (f", intercepted {1e3 * mass['intercepted_kg']:.2f} g" if mass['intercepted_kg'] else "")),

@@ -2,6 +2,11 @@
 served app on 127.0.0.1. Moving the disc-speed slider changes the CV text and the pattern
 picture; the time from the key press to the new picture is measured (median printed,
 not asserted). Every resource the pages load comes from the server itself (offline).
+The stale-answer sequences (a drag back to its start, an emptied or out-of-range field, a
+fast drag whose superseded requests are aborted) end on the picture `spreadgym simulate
+--json` gives for the controls shown; the layout at 390 x 844 (a phone) and 1400 x 900 has
+no horizontal scroll, no text under 12 px and no legend over a title; the print views
+carry their records.
 
 Set SPREADGYM_WEB_SHOTS=DIR to keep the screenshots and timings there (docs/web/).
 """
@@ -11,6 +16,8 @@ import os
 import shutil
 import socket
 import statistics
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -109,7 +116,7 @@ def test_moving_the_disc_speed_changes_the_cv_and_the_pattern(server, driver):
     cv_before = driver.find_element(By.ID, "cv").text
     picture_before = driver.find_element(By.ID, "pattern").screenshot_as_png
     driver.execute_script(PROBE)
-    slider = driver.find_element(By.CSS_SELECTOR, 'input[data-key="spinner.rpm"]')
+    slider = driver.find_element(By.CSS_SELECTOR, 'input[type=range][data-key="spinner.rpm"]')
     first, settled = [], []
     for move in range(MOVES):
         rev = driver.execute_script("return document.body.dataset.rev")
@@ -194,3 +201,190 @@ def test_the_fit_page_fits_a_tray_test(server, driver, tmp_path):
     shots = _shots()
     if shots:
         driver.save_screenshot(str(shots / "fit.png"))
+
+
+def _settled(driver, timeout: float = WAIT_S):
+    """Wait until the page shows a settled answer (full or precise) for its controls, nothing in flight."""
+    _wait(driver, "return document.body.dataset.stale === 'no' && ['full', 'precise'].includes("
+                  "document.body.dataset.mode) && window.__requests.every(r => r.ended !== null)", timeout)
+
+
+def _cli_json(shown: dict) -> dict:
+    """`spreadgym simulate --json` for the controls the page shows (its scene and --set values)."""
+    argv = [sys.executable, "-m", "spreadgym.cli.main", "simulate", "--scene", shown["scene"], "--json"]
+    for key, value in shown["set"].items():
+        argv += ["--set", f"{key}={json.dumps(value)}"]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def _assert_answers_the_controls(driver):
+    """The picture shown is `simulate --json` of the controls shown (wall time aside), and the controls the page
+    sent are the fields' values."""
+    shown = driver.execute_script("return window.__shown")
+    fields = driver.execute_script("return [...document.querySelectorAll('#controls input[type=number]')]"
+                                   ".map(f => [f.dataset.key, Number(f.value)])")
+    for key, value in fields:
+        sent = shown["set"][key]
+        assert (value in sent) if isinstance(sent, list) else sent == value, (key, value, sent)
+    cli = _cli_json(shown)
+    page = {k: v for k, v in shown["metrics"].items() if k != "wall_s"}
+    assert page == {k: v for k, v in cli.items() if k != "wall_s"}
+
+
+def _no_superseded_answer_after_its_successor(driver):
+    """No request completes (is shown) after a later one started."""
+    requests = driver.execute_script("return window.__requests")
+    for a in requests:
+        for b in requests:
+            if b["seq"] > a["seq"] and a["outcome"] == "shown":
+                assert a["ended"] <= b["started"] + 1.0, (a, b)
+    return requests
+
+
+def test_a_drag_back_to_its_start_settles(server, driver):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    driver.get(server + "/")
+    _settled(driver)
+    slider = driver.find_element(By.CSS_SELECTOR, 'input[type=range][data-key="spinner.rpm"]')
+    start = slider.get_attribute("value")
+    driver.execute_script("window.__requests.length = 0")
+    chain = ActionChains(driver).click_and_hold(slider)
+    for dx in (40, 40, 40, -40, -40, -40):
+        chain.move_by_offset(dx, 0).pause(0.15)
+    chain.release().perform()
+    _settled(driver)
+    assert slider.get_attribute("value") == driver.find_element(By.ID, "c0").get_attribute("value")
+    assert any(r["mode"] == "draft" for r in driver.execute_script("return window.__requests"))
+    assert driver.execute_script("return document.body.dataset.mode") == "full"
+    _no_superseded_answer_after_its_successor(driver)
+    _assert_answers_the_controls(driver)
+    del start
+
+
+def test_an_emptied_or_out_of_range_field_is_never_sent(server, driver):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    driver.get(server + "/")
+    _settled(driver)
+    field = driver.find_element(By.CSS_SELECTOR, 'input[type=number][data-key="feed.radius_m"]')
+    sent = driver.execute_script("return window.__requests.length")
+    field.send_keys(Keys.CONTROL, "a")
+    field.send_keys(Keys.BACKSPACE)
+    field.send_keys(Keys.TAB)
+    _wait(driver, "return document.body.dataset.stale === 'yes'")
+    error = driver.find_element(By.ID, "error").text
+    assert error.startswith("drop point radius: enter a number in [") and "m" in error
+    assert "not updated" in driver.find_element(By.ID, "stale").text
+    assert field.get_attribute("aria-invalid") == "true"
+    disc = driver.find_element(By.CSS_SELECTOR, 'input[type=number][data-key="spinner.rpm"]')
+    disc.send_keys(Keys.CONTROL, "a")
+    disc.send_keys("1500", Keys.TAB)  # over the slider's 1100: refused, not pinned
+    _wait(driver, "return document.getElementById('error').textContent.includes('disc speed: enter a number in')")
+    time.sleep(1.5)  # a pause longer than the page's settle timer: still nothing sent
+    assert driver.execute_script("return window.__requests.length") == sent
+    for element, value in ((field, "0.06"), (disc, "800")):
+        element.send_keys(Keys.CONTROL, "a")
+        element.send_keys(value, Keys.TAB)
+    _settled(driver)
+    assert driver.find_element(By.ID, "error").text == ""
+    assert driver.execute_script("return window.__shown.set['spinner.rpm']") == 800
+    _assert_answers_the_controls(driver)
+
+
+def test_a_fast_drag_aborts_superseded_requests(server, driver):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    driver.get(server + "/")
+    _settled(driver)
+    driver.execute_script("window.__requests.length = 0")
+    slider = driver.find_element(By.CSS_SELECTOR, 'input[type=range][data-key="vanes.pitch_deg"]')
+    for key in [Keys.ARROW_RIGHT] * 12 + [Keys.PAGE_UP, Keys.ARROW_LEFT, Keys.ARROW_LEFT]:
+        slider.send_keys(key)  # each press is a release too (keyup): drafts and settled answers supersede each other
+    _settled(driver)
+    requests = _no_superseded_answer_after_its_successor(driver)
+    assert any(r["outcome"] == "aborted" for r in requests), requests
+    assert requests[-1]["outcome"] == "shown" and requests[-1]["mode"] == "full"
+    _assert_answers_the_controls(driver)
+
+
+LAYOUT_CHECKS = """
+const out = {scroll: document.documentElement.scrollWidth - window.innerWidth, small: [], overlaps: []};
+const walker = document.createTreeWalker(document.body, NodeFilter.SHOW_TEXT);
+while (walker.nextNode()) {
+  const node = walker.currentNode, el = node.parentElement;
+  if (!node.textContent.trim() || !el) continue;
+  const style = getComputedStyle(el), box = el.getBoundingClientRect();
+  if (style.display === 'none' || style.visibility === 'hidden' || box.width === 0 || el.closest('[hidden]')) continue;
+  const size = parseFloat(style.fontSize);
+  if (size < 12) out.small.push([node.textContent.trim().slice(0, 30), size]);
+}
+const hit = (a, b) => a.left < b.right - 1 && b.left < a.right - 1 && a.top < b.bottom - 1 && b.top < a.bottom - 1;
+for (const plot of document.querySelectorAll('.js-plotly-plot')) {
+  const legend = plot.querySelector('g.legend');
+  if (!legend) continue;
+  const box = legend.getBoundingClientRect();
+  const titles = [...plot.querySelectorAll('.gtitle, .xtitle, .ytitle, .g-xtitle, .g-ytitle')];
+  const heading = plot.closest('figure') && plot.closest('figure').querySelector('h2');
+  if (heading) titles.push(heading);
+  for (const t of titles) if (t.getBoundingClientRect().width && hit(box, t.getBoundingClientRect()))
+    out.overlaps.push([plot.id, t.textContent]);
+}
+return out;
+"""
+
+
+@pytest.mark.parametrize("size", [(390, 844), (1400, 900)])
+def test_the_layout_fits_a_phone_and_a_desktop(server, driver, size):
+    width, height = size
+    phone = width < 900
+    driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {"width": width, "height": height,
+                                                                  "deviceScaleFactor": 1, "mobile": phone})
+    try:
+        driver.get(server + "/")
+        _settled(driver)
+        found = driver.execute_script(LAYOUT_CHECKS)
+        assert found["scroll"] <= 0, f"horizontal scroll of {found['scroll']} px at {width} px"
+        assert found["small"] == [], found["small"]
+        assert found["overlaps"] == [], found["overlaps"]
+        columns = driver.execute_script("return getComputedStyle(document.getElementById('figures'))"
+                                        ".gridTemplateColumns.split(' ').length")
+        assert columns == (1 if phone else 2)
+        shots = _shots()
+        if shots:
+            name = "pattern-phone.png" if phone else "pattern.png"
+            if phone:
+                full = driver.execute_script("return document.documentElement.scrollHeight")
+                driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {
+                    "width": width, "height": full, "deviceScaleFactor": 1, "mobile": True})
+            driver.save_screenshot(str(shots / name))
+    finally:
+        driver.execute_cdp_cmd("Emulation.clearDeviceMetricsOverride", {})
+
+
+def test_the_pattern_page_prints_its_record(server, driver):
+    from selenium.webdriver.common.by import By
+
+    driver.get(server + "/")
+    _settled(driver)
+    driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": "print"})
+    try:
+        record = driver.find_element(By.ID, "record")
+        assert record.is_displayed() and not driver.find_element(By.TAG_NAME, "aside").is_displayed()
+        text = record.text
+        cv = driver.execute_script("return window.__shown.metrics")
+        for expected in ("scene paper", "compound-10-16-10", "disc speed", "vane pitch", "drop point radius",
+                         "drop point angle", "working width", "racetrack", "+-", "effective swath", "printed 20",
+                         "spreadgym 0."):
+            assert expected in text, (expected, text)
+        assert f"{cv['runs']} runs" in text
+        shots = _shots()
+        if shots:
+            driver.save_screenshot(str(shots / "pattern-print.png"))
+    finally:
+        driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": ""})
