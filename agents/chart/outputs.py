@@ -68,7 +68,7 @@ def record_lines(spec: ChartSpec) -> list[tuple[str, str]]:
 
 def reversal_text(spec: ChartSpec, reversal: dict) -> str:
     """One remaining reversal in words: where, which settings turn and how, and its price."""
-    turns = "; ".join(f"{name.replace('_', ' ')} " + " → ".join(_dial({name: v}, name) for v in values)
+    turns = "; ".join(f"{_heading(name)} " + " → ".join(_dial({name: v}, name) for v in values)
                       for name, values in zip(reversal["settings"], reversal["values"]))
     aim = f"p{quantile_text(spec)} CV" if spec.objective == "robust" else "CV"
     price = ("no scored setting removes it" if reversal["price_pp"] is None else
@@ -211,8 +211,12 @@ def _dial(row: dict, name: str) -> str:
 
 
 def _heading(name: str) -> str:
+    """A setting's column or axis name in the chart's words: 'disc speed (rpm)', 'vane pitch (°)', 'feed radius
+    (mm)'."""
     if name == "rpm":
         return "disc speed (rpm)"
+    if name == "pitch_deg":
+        return "vane pitch (°)"
     if name.endswith("_deg"):
         return f"{name[:-4].replace('_', ' ')} (°)"
     return f"{name[:-2].replace('_', ' ')} (mm)"
@@ -270,7 +274,15 @@ def _figure(figsize):
 
 
 def chart_figure(spec: ChartSpec, rows: list[dict], threshold: float) -> bytes:
-    """CV at width per fertilizer (± 2 SE), and each setting against width, as PNG bytes."""
+    """CV at width per fertilizer (± 2 SE), and each setting against width, as PNG bytes (`chart_axes`)."""
+    fig = chart_axes(spec, rows, threshold)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    return buffer.getvalue()
+
+
+def chart_axes(spec: ChartSpec, rows: list[dict], threshold: float):
+    """chart.png's figure: its setting axes named in the chart's words ('disc speed (rpm)', 'vane pitch (°)')."""
     names = [c for c in columns(rows) if c not in HEAD and c not in TAIL]
     panels = 1 + len(names)
     ncols = min(3, panels)
@@ -286,23 +298,22 @@ def chart_figure(spec: ChartSpec, rows: list[dict], threshold: float) -> bytes:
                        for r in mine])
         axes[0].errorbar(widths, cv, yerr=2.0 * se, marker="o", ms=4, capsize=3, label=fertilizer)
         for ax, name in zip(axes[1:], names):
-            ax.plot(widths, [r[name] for r in mine], marker="o", ms=4, label=fertilizer)
+            ax.plot(widths, [1000 * r[name] if name.endswith("_m") else r[name] for r in mine], marker="o", ms=4,
+                    label=fertilizer)  # lengths in mm, as _heading names them
     axes[0].axhline(threshold, color="#c0392b", ls="--", lw=1, label=f"{threshold:g} % threshold")
     axes[0].set_ylabel("verified CV at width (%)")
     axes[0].set_title("CV at the working width (± 2 SE)")
     axes[0].legend(fontsize=7)
     for ax, name in zip(axes[1:], names):
-        ax.set_ylabel(name)
-        ax.set_title(name.replace("_", " "))
+        ax.set_ylabel(_heading(name))
+        ax.set_title(_heading(name).split(" (")[0])
     for ax in axes[:panels]:
         ax.set_xlabel("working width (m)")
         ax.grid(True, color="#e5e5e5")
     for ax in axes[panels:]:
         ax.set_visible(False)
     fig.suptitle(f"Spreading chart: scene {spec.scene['name']}, {spec.driving}")
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png")
-    return buffer.getvalue()
+    return fig
 
 
 def cell_picture(spec: ChartSpec, cell: Cell, record: dict) -> bytes:

@@ -189,14 +189,16 @@ def plot_data(scene: Scene, precise) -> dict:
     single-pass and overlapped tray pattern, CV against width."""
     from spreadgym.physics.geometry import vane_segments
     from spreadgym.spread import pattern
-    from spreadgym.viz.plots import RAY_BEYOND_DISC_M, departure_rays, overlapped_field
+    from spreadgym.viz.plots import RAY_BEYOND_DISC_M, departure_rays, first_disc, overlapped_field
 
     result = precise.as_result()
     dep = result.departure
+    centre, own, own_tracks = first_disc(result)  # a twin machine: its first disc, in that disc's frame
+    plates = [np.asarray(plate.endpoints()) - centre for plate in scene.deflectors]
     reach = scene.spinner.radius_m + RAY_BEYOND_DISC_M
-    if scene.deflectors:
-        reach = max(reach, max(max(math.hypot(*end) for end in plate.endpoints()) for plate in scene.deflectors) + 0.15)
-    departed = np.flatnonzero(result.launch.departed)
+    if plates:
+        reach = max(reach, max(max(math.hypot(*end) for end in plate) for plate in plates) + 0.15)
+    departed = np.flatnonzero(result.launch.departed[:own])
     shown = departed[np.unique(np.linspace(0, departed.size - 1, min(RAYS, departed.size)).round().astype(int))] \
         if departed.size else departed
     inner, outer = vane_segments(scene)
@@ -205,9 +207,9 @@ def plot_data(scene: Scene, precise) -> dict:
         "disc_radius_m": scene.spinner.radius_m, "twin": scene.twin is not None,  # the first disc, as simulate --plot
         "vanes": [_xy([a, b]) for a, b in zip(inner, outer)],
         "feed_m": [feed.radius_m * math.cos(feed.angle_rad), feed.radius_m * math.sin(feed.angle_rad)],
-        "tracks": [_xy(path) for path in dep.tracks[:TRACKS]],
-        "rays": [_xy(path) for path in departure_rays(result, shown, reach)],
-        "plates": [_xy(plate.endpoints()) for plate in scene.deflectors],
+        "tracks": [_xy(np.asarray(path) - centre) for path in dep.tracks[:min(TRACKS, own_tracks)]],
+        "rays": [_xy(path) for path in departure_rays(result, shown, reach, centre)],
+        "plates": [_xy(plate) for plate in plates],
         "reach_m": reach,
     }
     landing = result.landing.position_m

@@ -118,13 +118,24 @@ def _ray_indices(result, max_rays: int, first: int) -> np.ndarray:
     return np.concatenate([head, rest])
 
 
-def departure_rays(result, indices: Sequence[int], reach_m: float) -> list[np.ndarray]:
-    """Straight plan-view paths (K, 2) from the disc edge out to radius `reach_m`.
+def first_disc(result) -> tuple[np.ndarray, int, int]:
+    """The plan view's disc (a twin machine's first): its axis in the machine frame (m), and how many of the
+    departure's granules and paths are its own (every disc throws as many; the first disc's come first)."""
+    centres = result.scene.disc_centres_m
+    return (np.asarray(centres[0], dtype=float), len(result.departure.position_m) // len(centres),
+            len(result.departure.tracks) // len(centres))
+
+
+def departure_rays(result, indices: Sequence[int], reach_m: float,
+                   centre: Sequence[float] = (0.0, 0.0)) -> list[np.ndarray]:
+    """Straight plan-view paths (K, 2) from the disc edge out to radius `reach_m` about `centre` (the disc's
+    axis in the machine frame), in the frame of that disc.
 
     Without plates: along the departure velocity. With plates: to the first plate the
     departure line meets (if the granule was turned), then to where the granule left
     the deflector zone, then along its launch velocity (one-bounce reconstruction)."""
     dep, launch, plates = result.departure, result.launch, result.scene.deflectors
+    centre = np.asarray(centre, dtype=float)
     paths = []
     for i in indices:
         p0, v0 = dep.position_m[i], dep.velocity_m_s[i]
@@ -137,10 +148,10 @@ def departure_rays(result, indices: Sequence[int], reach_m: float) -> list[np.nd
                 points.append(hit[1])
             points.append(p1)
         start = points[-1]
-        t = _time_to_circle(start[None, :], v1[None, :], reach_m)[0]
+        t = _time_to_circle((start - centre)[None, :], v1[None, :], reach_m)[0]
         if t > 0:
             points.append(start + t * v1)
-        paths.append(np.asarray(points))
+        paths.append(np.asarray(points) - centre)
     return paths
 
 
@@ -175,8 +186,10 @@ def plan_view(ax, result, max_tracks: int = 30, max_rays: int = 80, legend: bool
     ax.plot([fx], [fy], marker="v", color="black", ms=7, ls="none", zorder=6)
     handles.append(Line2D([], [], marker="v", color="black", ls="none", ms=7, label="feed point"))
 
-    tracks = list(result.departure.tracks[:max_tracks])
-    rays = departure_rays(result, _ray_indices(result, max_rays, len(tracks)), reach)
+    centre, own, own_tracks = first_disc(result)  # a twin machine: its first disc, in that disc's frame
+    tracks = [np.asarray(t) - centre for t in result.departure.tracks[:min(max_tracks, own_tracks)]]
+    indices = _ray_indices(result, max_rays, len(tracks))
+    rays = departure_rays(result, indices[indices < own], reach, centre)
     for path in rays:
         ax.plot(path[:, 0], path[:, 1], color=RAY, lw=0.8, alpha=0.55, zorder=3)
     if rays:
@@ -186,15 +199,15 @@ def plan_view(ax, result, max_tracks: int = 30, max_rays: int = 80, legend: bool
     if tracks:
         handles.append(Line2D([], [], color=TRACK, lw=1.2, label="path on the disc"))
 
-    kept = ~result.departure.departed
+    kept = ~result.departure.departed[:own]
     if kept.any():
-        pos = result.departure.position_m[kept]
+        pos = result.departure.position_m[:own][kept] - centre
         ax.plot(pos[:, 0], pos[:, 1], "x", color="black", ms=4, zorder=5)
         handles.append(Line2D([], [], marker="x", color="black", ls="none",
                               label=f"retained ({int(kept.sum())})"))
 
     for plate in scene.deflectors:
-        (xa, ya), (xb, yb) = plate.endpoints()
+        (xa, ya), (xb, yb) = np.asarray(plate.endpoints()) - centre
         ax.plot([xa, xb], [ya, yb], color=PLATE, lw=4.5, solid_capstyle="round", zorder=7)
     if scene.deflectors:
         handles.append(Line2D([], [], color=PLATE, lw=4.5, label="deflector plate"))

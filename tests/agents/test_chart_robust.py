@@ -212,3 +212,21 @@ def test_pooled_runs_per_batch_are_one_run_of_their_granules():
     p90 = verify_p90(spec, cell, scene, {"spinner.rpm": 700.0, "vanes.pitch_deg": 5.0}, np.random.SeedSequence(1))
     assert (p90["runs_per_draw"], p90["granules"], p90["draws"]) == (3, 3 * 64, 4)
     assert spec.verify_simulations == 2 + 4 * 3
+
+
+def test_chart_png_names_its_axes_in_the_charts_words():
+    """chart.png's setting axes read 'disc speed (rpm)', 'vane pitch (°)', 'feed radius (mm)' (they read the
+    column names: pitch_deg, feed_radius_m)."""
+    from spreadgym.agents.chart.outputs import chart_axes
+
+    spec = make_spec("twin-field", "compound-10-16-10", "24", budget=2)[0]
+    names = ("pitch_deg", "feed_radius_m", "feed_angle_deg")
+    rows = [{"fertilizer": "compound-10-16-10", "width_m": 24.0, "driving": "back-and-forth", "rpm": 900.0,
+             "pitch_deg": 20.0, "feed_radius_m": 0.11, "feed_angle_deg": 120.0, "cv_percent": 7.0,
+             "cv_standard_error_percent": 0.2, "cv_p90_percent": 9.0, "cv_p90_standard_error_percent": 0.3,
+             "effective_swath_m": 25.0, "cv_search_percent": 7.1, "simulations": 10, "wall_s": 1.0}]
+    fig = chart_axes(spec, rows, 15.0)
+    labels = [ax.get_ylabel() for ax in fig.axes if ax.get_visible()]
+    assert labels[1:] == ["disc speed (rpm)", "vane pitch (°)", "feed radius (mm)", "feed angle (°)"]
+    assert not any(n in " ".join(labels) for n in names)
+    assert fig.axes[3].get_lines()[0].get_ydata()[0] == pytest.approx(110.0)  # millimetres, as labelled

@@ -137,3 +137,30 @@ def test_no_pyplot_global_state():
     calls = [node.func.attr for node in ast.walk(tree)
              if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)]
     assert "use" not in calls and "rcParams" not in Path(plots.__file__).read_text()
+
+
+def test_a_twin_machines_plan_view_draws_its_first_disc_in_its_frame():
+    """The plan view of a twin machine is its first disc about that disc's axis: every path on the disc lies on the
+    disc, every ray starts at its rim (simulate --plot and the web page alike; the paths were drawn in the machine
+    frame, 0.4 m off the disc drawn at the origin)."""
+    from spreadgym.agents.web.pattern import plot_data
+
+    scene = load_scene("twin-field", {"sim.granules": 256, "sim.angle_copies": 4})
+    result = run_scene(scene, ci=False, tracks=10)
+    radius = scene.spinner.radius_m
+    centre, own, own_tracks = plots.first_disc(result)
+    assert tuple(centre) == scene.disc_centres_m[0] and own_tracks == 10 and 2 * own == len(result.departure.position_m)
+    fig, ax = _axes()
+    plots.plan_view(ax, result)
+    red = [ln.get_xydata() for ln in ax.get_lines() if ln.get_color() == plots.TRACK]
+    assert len(red) == 10 and all(np.hypot(*path.T).max() <= radius * (1 + 1e-6) for path in red)
+    rays = [ln.get_xydata() for ln in ax.get_lines() if ln.get_color() == plots.RAY]
+    assert rays and all(np.hypot(*path[0]) == pytest.approx(radius, rel=1e-3) for path in rays)
+
+    class Precise:  # what the page's plot_data reads of simulate's pooled estimate
+        def as_result(self):
+            return result
+
+    plan = plot_data(scene, Precise())["plan"]
+    assert plan["tracks"] and all(np.hypot(*np.asarray(path)).max() <= radius * (1 + 1e-3) for path in plan["tracks"])
+    assert all(np.hypot(path[0][0], path[1][0]) == pytest.approx(radius, rel=1e-2) for path in plan["rays"])
