@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional, Sequence
+from typing import Callable, Iterable, Optional, Sequence
 
 import numpy as np
 from scipy.stats import qmc
@@ -121,7 +121,7 @@ def tested_settings(space, scene: Scene) -> dict:
 
 def advise(scene: Scene, test: TrayTest, width_m: float, fit: Sequence[str] = DEFAULT_FIT,
            budget: int = ADVICE_BUDGET, granules: int = ADVICE_GRANULES, fit_granules: int = FIT_GRANULES,
-           seed: Optional[int] = None, model: str = "auto",
+           seed: Optional[int] = None, model: str = "auto", fixed: Iterable[str] = (),
            progress: Optional[Callable[[str], None]] = None) -> Advice:
     """The advice for `scene` (the machine and the settings of `test`) at working width `width_m`: fit the keys
     of `fit` (KEY=LO:HI texts), search the settings on the fitted scene (`budget` candidates of `granules`
@@ -132,7 +132,7 @@ def advise(scene: Scene, test: TrayTest, width_m: float, fit: Sequence[str] = DE
     width_m = check_width(width_m, scene)
     seed = scene.sim.seed if seed is None else int(seed)
     scene = scene_with(scene, {"sim.seed": seed})
-    space = parse_fit_specs(fit, scene)
+    space = parse_fit_specs(fit, scene, fixed=fixed)
     say(f"fitting {', '.join(space.keys)} to {test.count} trays")
     fitted = fit_tray_test(scene, space, test, model=model, granules=fit_granules, seed=seed)
     at_width = scene_with(fitted.fitted_scene, {"pattern.target_swath_m": width_m})

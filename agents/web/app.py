@@ -240,9 +240,25 @@ def create_app(charts_dir: Path = Path("out/charts"), addresses: Addresses = LOO
         await run_in_threadpool(fit.fit_inputs, request)
         return await work("fit", "spreadgym.agents.web.fit:fit_task", request, http)
 
+    @app.post("/api/advise")
+    async def advise_view(request: fit.AdviseRequest, http: Request):
+        await run_in_threadpool(fit.advise_inputs, request)  # a bad input is answered at once, not in turn
+        return await work("fit", "spreadgym.agents.web.fit:advise_task", request, http)
+
     @app.get("/api/charts")
     def chart_list():
-        return {"charts": charts.chart_folders(jobs.root)}
+        listed = charts.chart_folders(jobs.root)
+        status = jobs.report()
+        if status["state"] == "running":  # the running job's folder, listed from its start (before its manifest)
+            mine = next((c for c in listed if c["name"] == status["out"]), None)
+            if mine is None:
+                listed.insert(0, mine := {"name": status["out"], "finished": False, "cells": 0})
+            mine["running"] = True
+        return {"charts": listed}
+
+    @app.delete("/api/charts/{name:path}")
+    def chart_remove(name: str):
+        return jobs.remove(name)
 
     @app.get("/api/charts/{name:path}")
     def chart_detail(name: str):
@@ -259,8 +275,7 @@ def create_app(charts_dir: Path = Path("out/charts"), addresses: Addresses = LOO
 
     @app.get("/api/chart-jobs")
     def job_status():
-        with jobs.lock:
-            return dict(jobs.status)
+        return jobs.report()
 
     @app.delete("/api/chart-jobs")
     def cancel_job():

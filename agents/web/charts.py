@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from spreadgym.config.base import brief
 from spreadgym.errors import SpreadgymError
+from spreadgym.out_folder import STAMP
 
 NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._-]{0,99}")  # one folder name: no '..', no hidden names
 MAX_DEPTH = 3  # chart folders are looked for this deep under the charts folder
@@ -31,6 +32,10 @@ FILE_TYPES = {".png": "image/png", ".csv": "text/csv", ".json": "application/jso
 MAX_READ_BYTES = 5_000_000  # chart.json / chart.md read for the page
 CANCEL_WAIT_S = 30.0  # after Ctrl-C, before the job's process is terminated
 SHUTDOWN_WAIT_S = 3.0  # the same when the server stops: it stops within a few seconds (finished cells are on disk)
+PROBE_GRANULES = 256  # the start's estimate times one run of this many granules per model, scaled to the chart's
+RAY_START_S = 10.0  # the embedded Ray's start in the estimate (6-8 s on an idle two-core machine)
+REMOVABLE = re.compile(r"(manifest\.json|chart\.(csv|json|md|png|html)|cells|\.?.*\.partial|"
+                       + re.escape(STAMP) + ")")  # what a chart folder holds: removed with an unfinished chart
 
 
 class NotFound(SpreadgymError):
@@ -72,6 +77,47 @@ def _file(root: Path, path: Path) -> Optional[Path]:
 
 def is_chart(root: Path, folder: Path) -> bool:
     return any(_file(root, folder / name) for name in ("chart.json", "manifest.json"))
+
+
+def estimate_s(spec, workers: int) -> float:
+    """A chart's time before any cell has finished, from one timed run per model at PROBE_GRANULES granules
+    scaled to the chart's: a cell is its search (budget x draws runs of the search model) and its verification
+    (the verify model's runs); rows run side by side on the workers, a row's cells one after the other."""
+    import math
+
+    from spreadgym.agents.chart.spec import Cell
+    from spreadgym.config.scene import scene_with
+    from spreadgym.spread.pipeline import run_scene
+
+    scene = spec.cell_scene(Cell(spec.fertilizers[0], spec.widths_m[0]))
+    probe = scene_with(scene, {"sim.granules": min(PROBE_GRANULES, scene.sim.granules)})
+    scale = scene.sim.granules / probe.sim.granules
+
+    def timed(model: str) -> float:
+        started = time.perf_counter()
+        run_scene(probe, model=model, ci=False)
+        return (time.perf_counter() - started) * scale
+
+    cell = spec.budget * spec.draws * timed(spec.search_model) + spec.verify_simulations * timed(spec.verify_model)
+    side_by_side = max(1, min(workers, len(spec.fertilizers)))
+    return RAY_START_S + math.ceil(len(spec.fertilizers) / side_by_side) * len(spec.widths_m) * cell
+
+
+def remove_folder(root: Path, name: str) -> None:
+    """Remove an unfinished chart folder (a cancelled or failed job's): only the chart's own files may be there."""
+    import shutil
+
+    folder = inside(root, name)
+    if not folder.is_dir() or not is_chart(root, folder) or folder == root.resolve():
+        raise NotFound(f"chart: no chart folder {brief(name)} under the charts folder")
+    if (folder / "chart.json").is_file():
+        raise SpreadgymError(f"chart {brief(name)}: finished; only an unfinished chart (a cancelled or failed job's) "
+                             "is removed from the page")
+    others = [p.name for p in folder.iterdir() if not REMOVABLE.fullmatch(p.name)]
+    if others:
+        raise SpreadgymError(f"chart {brief(name)}: holds other files ({', '.join(sorted(others)[:3])}); "
+                             "remove it by hand")
+    shutil.rmtree(folder)
 
 
 def chart_folders(root: Path) -> list[dict]:
@@ -225,10 +271,50 @@ class ChartJobs:
             self.cancelling = False
             self.process = context.Process(target=_job, args=(options, str(out), events), daemon=False)
             self.status = {"state": "running", "out": request.out, "done": 0, "total": len(spec.cells),
-                           "message": "starting the embedded Ray", "started": time.time()}
+                           "message": "starting the embedded Ray", "started": time.time(), "estimate_s": None}
             self.process.start()
             threading.Thread(target=self._follow, args=(self.process, events), daemon=True).start()
-            return dict(self.status)
+            threading.Thread(target=self._estimate, args=(spec, request.workers or cpus), daemon=True).start()
+        return self.report()
+
+    def _estimate(self, spec, workers: int) -> None:
+        """The chart's time before its first cell (`estimate_s`), once one run per model is timed."""
+        try:
+            total = estimate_s(spec, workers)
+        except Exception:  # an estimate is not worth a failed job: the page says it has none
+            return
+        with self.lock:
+            if self.status.get("state") == "running" and self.status.get("estimate_s") is None:
+                self.status["estimate_s"] = total
+
+    def report(self) -> dict:
+        """The job's status with its elapsed time and the time left: from the start's estimate until a cell has
+        finished, then from the cells' own pace."""
+        with self.lock:
+            status = dict(self.status)
+        if status["state"] == "idle":
+            return status
+        end = status.get("ended") or time.time()
+        elapsed = end - status["started"]
+        left = None
+        if status["state"] == "running":
+            done, total = status["done"], status["total"]
+            if done:
+                left = elapsed / done * (total - done)
+            elif status.get("estimate_s") is not None:
+                left = max(0.0, status["estimate_s"] - elapsed)
+        return {**status, "elapsed_s": elapsed, "left_s": left}
+
+    def remove(self, name: str) -> dict:
+        """Remove an unfinished chart folder that no job is writing (`remove_folder`); the job's status is
+        cleared when it is its folder."""
+        with self.lock:
+            if self.running() and self.status.get("out") == name:
+                raise SpreadgymError(f"chart {brief(name)}: its job is running; cancel it first")
+            remove_folder(self.root, name)
+            if self.status.get("out") == name:
+                self.status = {"state": "idle"}
+            return {"removed": name}
 
     def _follow(self, process, events) -> None:
         """Read the job's events until it ends."""
@@ -273,7 +359,7 @@ class ChartJobs:
         with self.lock:
             if self.status["state"] == "running":
                 self.status.update(state="cancelled", message="cancelled; finished cells kept", ended=time.time())
-        return dict(self.status)
+        return self.report()
 
     def shutdown(self) -> None:
         """Stop a running job when the server stops (within SHUTDOWN_WAIT_S and a moment)."""

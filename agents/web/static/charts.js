@@ -1,19 +1,10 @@
 // The chart page: chart folders under the server's --charts folder, one chart job at a time.
 "use strict";
 const $ = (id) => document.getElementById(id);
-
-async function api(path, options) {
-  const response = await fetch(path, options);
-  const data = await response.json();
-  if (!response.ok) throw new Error(data.error || response.statusText);
-  return data;
-}
-
-function escaped(text) {
-  const div = document.createElement("div");
-  div.textContent = text;
-  return div.innerHTML;
-}
+const WORDS = { "--widths": "working widths", "--fertilizers": "fertilizers", "--budget": "simulations per cell",
+  "--workers": "workers", "--out": "folder name", "--scene": "scene", "--granules": "granules", "--seed": "seed",
+  "--driving": "driving" };
+const fail = (err) => { $("error").textContent = inPageWords(err.message, WORDS); };
 
 function markdown(text) {  // chart.md as HTML: headings, the pipe table, list items, paragraphs (text escaped)
   const out = [];
@@ -54,7 +45,7 @@ async function showChart(name) {
     $("chart").innerHTML = parts.join("\n");
     $("error").textContent = "";
   } catch (err) {
-    $("error").textContent = err.message;
+    fail(err);
   }
 }
 
@@ -64,7 +55,8 @@ async function listCharts() {
   for (const c of data.charts) {
     const li = document.createElement("li");
     const a = document.createElement("a");
-    a.textContent = c.name + (c.finished ? "" : " (" + c.cells + " cell(s), not finished)");
+    a.textContent = c.name + (c.running ? " (running: " + c.cells + " cell(s) so far)" :
+      c.finished ? "" : " (" + c.cells + " cell(s), not finished)");
     a.addEventListener("click", () => showChart(c.name));
     li.appendChild(a);
     $("folders").appendChild(li);
@@ -72,11 +64,16 @@ async function listCharts() {
   if (!data.charts.length) $("folders").innerHTML = "<li>none yet</li>";
 }
 
-function showJob(s) {
+function showJob(s) {  // cells done, elapsed and the time left, from the first second
+  $("job-remove").hidden = !["cancelled", "failed"].includes(s.state);
   if (s.state === "idle") { $("job-status").textContent = "no job"; return; }
-  $("job-status").textContent = `${s.out}: ${s.state}, ${s.done} of ${s.total} cell(s); ${s.message}`;
+  const left = s.state !== "running" ? "" : s.left_s === null ? "; estimating the time left" :
+    "; about " + duration(s.left_s) + " left" + (s.done ? "" : " (estimated from one timed run)");
+  $("job-status").textContent = `${s.out}: ${s.state}, ${s.done} of ${s.total} cell(s), ` +
+    `${duration(s.elapsed_s)} elapsed${left}; ${s.message}`;
   $("job-progress").max = s.total || 1;
   $("job-progress").value = s.done || 0;
+  document.body.dataset.job = s.state;
 }
 
 let lastState = null;
@@ -85,11 +82,24 @@ async function poll() {
   try {
     const s = await api("/api/chart-jobs");
     showJob(s);
-    if (s.state === "running") setTimeout(poll, 1000);
+    if (s.state === "running") { setTimeout(poll, 1000); if (lastState !== "running") listCharts(); }
     else if (lastState === "running") listCharts();  // the job's folder appears or changes
     lastState = s.state;
   } catch (err) {
-    $("error").textContent = err.message;
+    fail(err);
+  }
+}
+
+async function removeJob() {
+  const s = await api("/api/chart-jobs");
+  if (!window.confirm(`Remove the folder ${s.out} and its ${s.done} finished cell(s)?`)) return;
+  try {
+    await api("/api/charts/" + encodeURIComponent(s.out), { method: "DELETE" });
+    $("error").textContent = "";
+    await listCharts();
+    showJob(await api("/api/chart-jobs"));
+  } catch (err) {
+    fail(err);
   }
 }
 
@@ -103,7 +113,7 @@ async function startJob() {
     $("error").textContent = "";
     poll();
   } catch (err) {
-    $("error").textContent = err.message;
+    fail(err);
   }
 }
 
@@ -112,7 +122,7 @@ async function cancelJob() {
   try {
     showJob(await api("/api/chart-jobs", { method: "DELETE" }));
   } catch (err) {
-    $("error").textContent = err.message;
+    fail(err);
   }
 }
 
@@ -121,8 +131,9 @@ async function start() {
   for (const name of scenes.scenes) $("job-scene").add(new Option(name, name, false, name === "paper"));
   $("job-start").addEventListener("click", startJob);
   $("job-cancel").addEventListener("click", cancelJob);
+  $("job-remove").addEventListener("click", removeJob);
   await listCharts();
   poll();
 }
 
-start().catch((err) => { $("error").textContent = err.message; });
+start().catch(fail);

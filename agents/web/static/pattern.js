@@ -18,18 +18,15 @@ const LAYOUT = { margin: { l: 56, r: 12, t: 8, b: 46 }, font: FONT, showlegend: 
   xaxis: { automargin: true }, yaxis: { automargin: true } };
 const LEGEND_ROWS_PX = 22;  // the legend sits above the plot area: the top margin grows with its rows
 
-async function api(path, body, signal) {
-  const response = await fetch(path, body === undefined ? {} : { method: "POST", signal,
-    headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
-  const data = await response.json();
-  if (!response.ok) throw new Error(data.error || response.statusText);
-  return data;
+function post(path, body, signal) {
+  return api(path, { method: "POST", signal, headers: { "Content-Type": "application/json" },
+    body: JSON.stringify(body) });
 }
 
 function pageWords(message) {  // the server's message in the page's words: its controls, not scene keys or flags
-  let text = message;
-  for (const c of (state.info ? state.info.controls : [])) text = text.split(c.key).join(c.label);
-  return text.replace("--set ", "");
+  const words = { "--set ": "", "--precision": "precision", "--max-runs": "runs" };
+  for (const c of (state.info ? state.info.controls : [])) words[c.key] = c.label;
+  return inPageWords(message, words);
 }
 
 function problems() {  // the controls whose field cannot be sent: empty, not a number, or outside its range
@@ -96,7 +93,7 @@ async function send(mode, body, key) {
   $("status").textContent = mode === "precise" ? "computing the precise estimate..." : "computing...";
   stale(mode === "precise" ? "computing the precise estimate..." : "computing...");
   try {
-    const data = await api("/api/pattern", body, controller.signal);
+    const data = await post("/api/pattern", body, controller.signal);
     if (state.inflight !== mine) { entry.outcome = "superseded"; return; }
     entry.outcome = "shown";
     $("error").textContent = "";
@@ -154,12 +151,6 @@ function record(data, body) {  // what a print of the page carries (print only)
     `${escaped(m.model)} model); effective swath: ${escaped(data.swath_text)}</p>` +
     `<p>printed ${new Date().toISOString().slice(0, 16).replace("T", " ")}, spreadgym ${escaped(state.version)}` +
     (state.yaml !== null ? " (an uploaded scene)" : "") + "</p>";
-}
-
-function escaped(text) {
-  const div = document.createElement("div");
-  div.textContent = text;
-  return div.innerHTML;
 }
 
 function joined(paths) {  // many paths as one trace, separated by gaps
@@ -295,7 +286,7 @@ function buildControls(info) {
 
 async function selectScene(body) {
   try {
-    const info = await api("/api/scene", body);
+    const info = await post("/api/scene", body);
     state.info = info;
     state.yaml = body.yaml === undefined ? null : body.yaml;
     state.shownKey = null;
