@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from spreadgym.cli import arguments
 from spreadgym.config.overrides import parse_assignments
@@ -49,6 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", type=arguments.output_folder, metavar="DIR",
                         help="write PNG pictures into DIR (made when the run is done; never over an input)")
     arguments.force_flag(parser)
+    parser.add_argument("--report", type=Path, metavar="FILE",
+                        help="write a record worth printing (scene, machine, fertilizer, every setting, CV +- SE, "
+                             "swath, the pattern and the CV curve, date, version) as FILE.html or FILE.pdf")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -69,6 +73,11 @@ def run(args: argparse.Namespace) -> int:
         plots = OutFolder(args.plot, "simulate", SIMULATION_PLOTS, named_files(args.scene, args.materials), args.force,
                           marker=SIMULATION_PLOTS[0], flag="--plot")
         plots.check()
+    if args.report is not None:
+        from spreadgym.out_folder import named_files
+        from spreadgym.viz.record import check_report_path
+
+        check_report_path(args.report, named_files(args.scene, args.materials))
     with tqdm(desc="runs", unit="run", file=sys.stderr, disable=None, leave=False) as bar:
         precise = simulate_precisely(scene, args.precision, args.max_runs, model=args.model,
                                      tracks=30 if args.plot else 0, progress=lambda done, _cap: bar.update(1))
@@ -79,6 +88,10 @@ def run(args: argparse.Namespace) -> int:
         with plots.writing() as folder:
             written = write_simulation_plots(precise.as_result(), folder)
     payload = precise.to_json()
+    if args.report is not None:
+        from spreadgym.viz.record import write_report
+
+        written.append(write_report(args.report, scene, payload, precise.as_result()))
     if args.json:
         print_json(payload)
     else:
