@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import html
 import io
+import json
 import math
 from pathlib import Path
 from types import SimpleNamespace
@@ -68,7 +69,8 @@ def record_lines(spec: ChartSpec) -> list[tuple[str, str]]:
 
 def reversal_text(spec: ChartSpec, reversal: dict) -> str:
     """One remaining reversal in words: where, which settings turn and how, and its price."""
-    turns = "; ".join(f"{_heading(name)} " + " → ".join(_dial({name: v}, name) for v in values)
+    turns = "; ".join(f"{_heading(name).split(' (')[0]} " + " → ".join(_dial({name: v}, name) for v in values)
+                      + f" {_heading(name).split(' (')[1][:-1]}"
                       for name, values in zip(reversal["settings"], reversal["values"]))
     aim = f"p{quantile_text(spec)} CV" if spec.objective == "robust" else "CV"
     price = ("no scored setting removes it" if reversal["price_pp"] is None else
@@ -164,8 +166,9 @@ def quantile_text(spec: ChartSpec) -> str:
     return f"{100 * spec.variability['quantile']:g}"
 
 
-def method_text(spec: ChartSpec) -> str:
-    """How the settings were found, in a sentence's words."""
+def method_text(spec: ChartSpec, tie_sets: bool = True) -> str:
+    """How the settings were found, in a sentence's words (`tie_sets` False: a chart made before steady rows, each
+    cell searched on its own)."""
     aim = (f"the p{quantile_text(spec)} CV over {spec.variability['draws']} batches of the variability model"
            if spec.objective == "robust" else "the nominal CV")
     search = (f"CMA-ES on the {spec.search_model} model ({spec.budget} candidates of {spec.granules} granules "
@@ -177,7 +180,7 @@ def method_text(spec: ChartSpec) -> str:
     prefer = ("the lowest disc speed, then the smallest change from the neighbouring widths"
               if spec.tie_preference == "lowest-rpm" else "the smallest change from the neighbouring widths")
     steady = (f"; steady rows: among the settings within two standard errors of each cell's best{tolerance}, "
-              f"{prefer}")
+              f"{prefer}" if tie_sets else "; each cell searched on its own (a chart made before steady rows)")
     if spec.method == "policy+search":
         return f"Settings found by {search}, started at a trained policy's proposal{steady}"
     return f"Settings found by {search}{steady}"
@@ -229,14 +232,17 @@ def printable(spec: ChartSpec, payload: dict) -> str:
     names = [c for c in payload["columns"] if c not in HEAD and c not in TAIL]
     q = quantile_text(spec)
     esc = html.escape
+    robust = all(r.get("cv_p90_percent") is not None for r in rows)  # a chart before robust cells has no p90
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              f"<title>Spreading chart: {esc(spec.scene['name'])}</title><style>{PRINT_CSS}</style></head><body>",
              f"<h1>Spreading chart: {esc(spec.scene['name'])}, {esc(spec.driving)} driving</h1>",
-             f"<p>{esc(method_text(spec))}. Expected CV at the working width: nominal ± standard error "
-             f"({esc(spec.verify_model)} model, {spec.verify_runs} runs of {spec.granules} granules), and the CV "
-             f"{q} % of batches stay under (p{q}: fertilizer friction, restitution, size and density, disc speed "
-             f"and vane pitch varied as the variability model says). Rows in red exceed the {threshold:g} % "
-             "threshold.</p>",
+             f"<p>{esc(method_text(spec, any(c.get('tie_set') for c in payload['cells'])))}. Expected CV at the "
+             "working width: nominal ± standard error "
+             f"({esc(spec.verify_model)} model, {spec.verify_runs} runs of {spec.granules} granules)"
+             + (f", and the CV {q} % of batches stay under (p{q}: fertilizer friction, restitution, size and "
+                "density, disc speed and vane pitch varied as the variability model says)" if robust else
+                " (a chart made before robust cells: no p90)")
+             + f". Rows in red exceed the {threshold:g} % threshold.</p>",
              "<dl>" + "".join(f"<dt>{esc(label)}</dt><dd>{esc(text)}</dd>" for label, text in record_lines(spec))
              + "</dl>"]
     turning = {(v["fertilizer"], v["width_m"]) for v in payload.get("reversals", [])}
@@ -246,7 +252,7 @@ def printable(spec: ChartSpec, payload: dict) -> str:
         parts.append(f"<h2>{esc(fertilizer)}" + ("" if widest is None else f" (up to {widest:g} m)") + "</h2>")
         parts.append('<table><tr><th class="width">width (m)</th>'
                      + "".join(f"<th>{esc(_heading(n))}</th>" for n in names)
-                     + f"<th>CV (%)</th><th>p{q} CV (%)</th></tr>")
+                     + "<th>CV (%)</th>" + (f"<th>p{q} CV (%)</th>" if robust else "") + "</tr>")
         for r in mine:
             cv = r["cv_percent"]
             over = cv is None or cv > threshold
@@ -255,12 +261,22 @@ def printable(spec: ChartSpec, payload: dict) -> str:
             tr = f'<tr class="{kinds}">' if kinds else "<tr>"
             parts.append(f'{tr}<td class="width">{r["width_m"]:g}</td>'
                          + "".join(f"<td>{_dial(r, n)}</td>" for n in names)
-                         + f"<td>{band}</td><td>{r['cv_p90_percent']:.1f}</td></tr>")
+                         + f"<td>{band}</td>" + (f"<td>{r['cv_p90_percent']:.1f}</td>" if robust else "") + "</tr>")
         parts.append("</table>")
     parts += [f"<p>{esc(line)}</p>" for line in reversal_lines(spec, payload) if line]
     parts += [f"<p>{esc(note)}</p>" for note in payload["notes"]]
     parts.append("</body></html>")
     return "\n".join(parts) + "\n"
+
+
+def rewrite_printable(folder: Path) -> Path:
+    """chart.html of a finished chart folder made again from its chart.json (a chart made before chart.html or its
+    records existed: docs/charts/)."""
+    payload = json.loads((Path(folder) / "chart.json").read_text(encoding="utf-8"))
+    spec = ChartSpec.from_manifest(payload["spec"])
+    records = [{"row": row, "detail": cell} for row, cell in zip(payload["rows"], payload["cells"])]
+    payload = {**payload, "reversals": reversal_prices(spec, records)}
+    return write_atomic(Path(folder) / "chart.html", printable(spec, payload))
 
 
 def _figure(figsize):

@@ -39,6 +39,7 @@ TIE_PREFERENCES = ("lowest-rpm", "nearest")  # among tied points (sweep.py): the
 # What a manifest without the field meant (charts made before the field): a manifest leaves a field out at this
 # value, and an older chart folder or chart.json is read with it
 MANIFEST_DEFAULTS = {"steady_tolerance_pp": 0.0, "tie_preference": "nearest"}
+READ_DEFAULTS = {**MANIFEST_DEFAULTS, "objective": "nominal"}  # a record without `objective` predates robust cells
 OBJECTIVES = ("robust", "nominal")  # robust: the search minimises the variability model's quantile
 METHODS = ("cmaes", "policy", "policy+search")
 
@@ -113,9 +114,9 @@ class ChartSpec:
 
     @classmethod
     def from_manifest(cls, manifest: dict) -> "ChartSpec":
-        """The spec a manifest (or chart.json's `spec`) records; a field it leaves out has its MANIFEST_DEFAULTS
+        """The spec a manifest (or chart.json's `spec`) records; a field it leaves out has its READ_DEFAULTS
         value (what charts made before the field did)."""
-        fields = {**MANIFEST_DEFAULTS, **manifest}
+        fields = {**READ_DEFAULTS, "variability": check_variability(None), **manifest}
         return cls(**{k: tuple(v) if k in ("fertilizers", "widths_m") else v for k, v in fields.items()})
 
     def manifest(self) -> dict:

@@ -265,7 +265,7 @@ def repair_block(spec, detail: dict, candidates: list[dict]) -> dict:
 
 def candidates_of(detail: dict) -> list[dict]:
     """The repair's candidates recorded in a cell's sweep block (none before a sweep)."""
-    return ((detail["sweep"] or {}).get("repair") or {}).get("candidates", [])
+    return ((detail.get("sweep") or {}).get("repair") or {}).get("candidates", [])
 
 
 def verified_figures(row: dict) -> dict:
@@ -323,8 +323,9 @@ def reversal_prices(spec, records: Sequence[dict]) -> list[dict]:
             continue
         details = [r["detail"] for r in mine]
         spaces = [spec.space(spec.cell_scene(Cell(fertilizer, r["row"]["width_m"]))) for r in mine]
-        scored = row_points(spaces, [{**d["tie_set"], "points": list(d["tie_set"]["points"]) + candidates_of(d)}
-                                     for d in details])
+        # a chart made before tie sets (issue 31) has no scored alternatives: its reversals are listed unpriced
+        scored = [row_points([space], [{**d["tie_set"], "points": list(d["tie_set"]["points"]) + candidates_of(d)}])[0]
+                  if d.get("tie_set") else [] for space, d in zip(spaces, details)]
         chosen = [next((p for p in cell if list(p.unit) == d["unit_settings"]),
                        Point(tuple(d["unit_settings"]), space.values(d["unit_settings"]), 0.0))
                   for cell, d, space in zip(scored, details, spaces)]

@@ -58,8 +58,8 @@ def test_the_advice_keeps_the_contract_and_beats_the_tested_settings(advised, ca
     assert data["instruction"].startswith("Set the disc speed to") or data["instruction"].startswith("Set the vane")
     # at the true keys (the truth's model), the advised settings spread more evenly than the tested ones
     truth = scene_with(load_scene("paper"), {**TRUTH, "pattern.target_swath_m": WIDTH})
-    before = simulate_precisely(scene_with(truth, data["tested"]), 0.2, 16, model="compiled").to_json()["cv_percent_at_target"]
-    after = simulate_precisely(scene_with(truth, data["advised"]), 0.2, 16, model="compiled").to_json()["cv_percent_at_target"]
+    before, after = (simulate_precisely(scene_with(truth, data[k]), 0.2, 16, model="compiled").to_json()
+                     ["cv_percent_at_target"] for k in ("tested", "advised"))
     assert after < before - 5.0, (before, after)
     # the files: the same advice, the fitted scene and the advised one (simulate takes it)
     assert json.loads((out / "advice.json").read_text())["changes"] == data["changes"]

@@ -230,3 +230,22 @@ def test_chart_png_names_its_axes_in_the_charts_words():
     assert labels[1:] == ["disc speed (rpm)", "vane pitch (°)", "feed radius (mm)", "feed angle (°)"]
     assert not any(n in " ".join(labels) for n in names)
     assert fig.axes[3].get_lines()[0].get_ydata()[0] == pytest.approx(110.0)  # millimetres, as labelled
+
+
+def test_a_chart_made_before_the_print_page_gets_one(tmp_path):
+    """chart.html made again from chart.json (rewrite_printable): a chart from before robust cells and tie sets
+    (docs/charts/paper) prints without a p90 column, with its machine, fixed settings, date and version, and its
+    reversals flagged unpriced."""
+    import shutil
+
+    from spreadgym.agents.chart.outputs import rewrite_printable
+
+    ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
+    shutil.copytree(ROOT / "docs" / "charts" / "paper", tmp_path / "paper")
+    (tmp_path / "paper" / "chart.html").unlink(missing_ok=True)
+    page = rewrite_printable(tmp_path / "paper").read_text(encoding="utf-8")
+    assert "p90 CV" not in page and "no p90" in page and "made before steady rows" in page
+    for expected in ("<dt>machine</dt>", "<dt>fixed settings</dt><dd>drop radius 43 mm; drop angle 105.0°</dd>",
+                     "<dt>made by</dt><dd>spreadgym 0."):
+        assert expected in page, expected
+    assert page.count('class="turn"') == 7 and "compound-10-16-10 4 m: disc speed 901 → 647 → 1091 rpm" in page
