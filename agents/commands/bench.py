@@ -16,7 +16,8 @@ from spreadgym.report import format_table
 
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
             "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "honesty", "env-noise",
-            "chart-quality", "fit", "batch", "validation", "server")
+            "chart-quality", "fit", "batch", "validation", "server", "web",
+            "advise")
 """Every section, in the order `make bench` runs them (`section_runners` gives each its work)."""
 
 
@@ -39,7 +40,9 @@ def write_csv(rows: list[dict], path: Path) -> None:
 
 def section_runners(args: argparse.Namespace, say) -> dict:
     """What each of SECTIONS runs (a callable giving its rows), with `args.out` and `args.repeats`."""
+    from spreadgym.agents.advise import bench as advise_bench
     from spreadgym.agents.chart import quality, scale
+    from spreadgym.agents.web import bench as web_bench
     from spreadgym.studies import (
         benchmarks,
         estimate_bench,
@@ -79,6 +82,8 @@ def section_runners(args: argparse.Namespace, say) -> dict:
         "batch": lambda: batch_rows(repeats=max(args.repeats, 5)),
         "validation": lambda: validation.write_validation(args.out, say),
         "server": lambda: server_rows(args.repeats),
+        "web": lambda: web_bench.web_rows(repeats=max(args.repeats, 5), progress=say),
+        "advise": lambda: advise_bench.advise_bench_rows(args.out / "advise", tests=20, progress=say),
     }
 
 

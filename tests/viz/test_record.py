@@ -48,3 +48,17 @@ def test_a_report_never_replaces_the_scene_file(tmp_path, capsys):
     assert main(["simulate", "--scene", str(scene), *SMALL, "--report", str(scene)]) == 2
     assert "would replace an input" in capsys.readouterr().err
     assert scene.read_text() == resolve_named("scenes", "paper").read_text()
+
+
+@pytest.mark.parametrize("swath, cv, expected", [
+    (3.5, 7.4, "3.5 m (CV <= 15 % up to it)"),
+    (0.5, 31.0, "none: no working width of two trays or more stays under 15 %"),  # one tray's CV is always 0
+    (29.0, 17.0, "not at 8 m: the CV is 17.0 % there, over 15 % (the CV dips under it again at 29 m, a wider width)"),
+    (5.0, 24.0, "5 m, narrower than the 8 m working width (the CV is 24.0 % there, over 15 %)"),
+])
+def test_the_swath_never_reads_as_good_news_when_it_is_not(swath, cv, expected):
+    from spreadgym.report import swath_text
+
+    metrics = {"effective_swath_m": swath, "target_swath_m": 8.0 if swath != 3.5 else 3.0, "tray_width_m": 0.5,
+               "cv_threshold_percent": 15.0, "cv_percent_at_target": cv}
+    assert swath_text(metrics) == expected

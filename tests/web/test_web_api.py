@@ -144,6 +144,22 @@ def test_oversized_bodies_are_refused(client):
     assert client.get("/api/health").json() == {"ok": True}
 
 
+def test_the_fertilizers_offered_are_those_that_can_run(client):
+    """A fertilizer whose surface pairs on the scene are not measured is not offered (the paper scene's disc
+    material has no measured restitution for the mixture): the page lists what chart --fertilizers all takes."""
+    from spreadgym.agents.chart.spec import resolve_fertilizers
+    from spreadgym.config.materials import load_library
+    from spreadgym.config.scene import load_scene
+
+    offered = client.post("/api/scene", json={"scene": "paper"}).json()["fertilizers"]
+    runnable, left_out = resolve_fertilizers("all", load_scene("paper"), load_library())
+    assert offered == sorted(runnable) and left_out
+    assert all(name.split(" ")[0] not in offered for name in left_out)
+    for name in offered:  # each one offered does run
+        answer = client.post("/api/simulate", json={"set": {**SMALL, "fertilizer": name}, "max_runs": 2})
+        assert answer.status_code == 200, (name, answer.text)
+
+
 def test_chart_folders_and_files(client):
     listed = client.get("/api/charts").json()["charts"]
     assert [c["name"] for c in listed] == ["paper"] and listed[0]["finished"]
@@ -178,7 +194,15 @@ def test_a_cancelled_chart_job_leaves_the_server_working(client, charts_dir):
     started = client.post("/api/chart-jobs", json=job)
     assert started.status_code == 200, started.text
     assert started.json()["state"] == "running" and started.json()["total"] == 14
+    assert started.json()["elapsed_s"] >= 0.0 and started.json()["done"] == 0
     assert client.post("/api/chart-jobs", json=job).status_code == 422  # one at a time
+    listed = {c["name"]: c for c in client.get("/api/charts").json()["charts"]}
+    assert listed["job"]["running"]  # listed from its start
+    deadline = time.monotonic() + 120
+    while client.get("/api/chart-jobs").json()["left_s"] is None and time.monotonic() < deadline:
+        time.sleep(0.2)  # the estimate: one timed run per model
+    status = client.get("/api/chart-jobs").json()
+    assert status["left_s"] > 0 and status["estimate_s"] > status["left_s"] - 1e-9
     deadline = time.monotonic() + 180
     while client.get("/api/chart-jobs").json()["done"] < 1 and time.monotonic() < deadline:
         time.sleep(0.5)  # cancelled while Ray runs its cells
@@ -193,3 +217,11 @@ def test_a_cancelled_chart_job_leaves_the_server_working(client, charts_dir):
     assert not (charts_dir / "job" / "chart.json").exists()
     listed = {c["name"]: c for c in client.get("/api/charts").json()["charts"]}
     assert not listed["job"]["finished"] and listed["job"]["cells"] >= 1  # finished cells kept
+    # the cancelled job's folder can be removed (only it: a finished chart stays)
+    assert client.delete("/api/charts/paper").status_code == 422 and (charts_dir / "paper" / "chart.json").exists()
+    (charts_dir / "job" / "mine.txt").write_text("a user's file")
+    kept = client.delete("/api/charts/job")
+    assert kept.status_code == 422 and "holds other files (mine.txt)" in kept.json()["error"]
+    (charts_dir / "job" / "mine.txt").unlink()
+    assert client.delete("/api/charts/job").json() == {"removed": "job"}
+    assert not (charts_dir / "job").exists() and client.get("/api/chart-jobs").json()["state"] == "idle"

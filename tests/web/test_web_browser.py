@@ -14,21 +14,19 @@ Set SPREADGYM_WEB_SHOTS=DIR to keep the screenshots and timings there (docs/web/
 import json
 import os
 import shutil
-import socket
 import statistics
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 
+from spreadgym.agents.web import browser
+
 ROOT = Path(__file__).resolve().parents[2]
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
 MOVES = 9
-WAIT_S = 120
+WAIT_S = browser.WAIT_S
 
 # Records the moment of each key press and of each new picture (data-rev) in the page's clock.
 PROBE = """
@@ -39,59 +37,26 @@ new MutationObserver(() => window.__renders.push([performance.now(), document.bo
 """
 
 
-def _browser():
-    missing = [path for path in (CHROMIUM, CHROMEDRIVER) if not os.access(path, os.X_OK)]
-    if missing:
-        pytest.skip(f"no browser: {', '.join(missing)} not found; install Debian's chromium and chromium-driver "
-                    "(apt-get install chromium chromium-driver; .ci/run does)")
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for flag in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--window-size=1400,1000",
-                 "--disable-gpu"):
-        options.add_argument(flag)
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
-    driver.set_page_load_timeout(WAIT_S)
-    driver.set_script_timeout(WAIT_S)
-    return driver
-
-
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    import uvicorn
-
-    from spreadgym.agents.web.app import create_app
-
     charts = tmp_path_factory.mktemp("charts")
     shutil.copytree(ROOT / "docs" / "charts" / "paper", charts / "paper")
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(create_app(charts), host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 60
-    while not server.started and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert server.started, "the server did not start in 60 s"
-    yield f"http://127.0.0.1:{port}"
-    server.should_exit = True
-    thread.join(timeout=15)
+    with browser.served(charts) as address:
+        yield address
 
 
 @pytest.fixture(scope="module")
 def driver():
-    browser = _browser()
-    yield browser
-    browser.quit()
+    if browser.missing():
+        pytest.skip(f"no browser: {', '.join(browser.missing())} not found; install Debian's chromium and "
+                    "chromium-driver (apt-get install chromium chromium-driver; .ci/run does)")
+    chromium = browser.browser()
+    yield chromium
+    chromium.quit()
 
 
 def _wait(driver, script: str, timeout: float = WAIT_S):
-    from selenium.webdriver.support.ui import WebDriverWait
-
-    return WebDriverWait(driver, timeout, poll_frequency=0.02).until(lambda d: d.execute_script(script))
+    return browser.wait(driver, script, timeout)
 
 
 def _shots() -> Path | None:
@@ -198,15 +163,26 @@ def test_the_fit_page_fits_a_tray_test(server, driver, tmp_path):
     assert driver.find_element(By.ID, "error").text == ""
     assert key in driver.find_element(By.ID, "estimates").text
     assert driver.find_element(By.CSS_SELECTOR, "#download a").get_attribute("download") == "paper-fitted.yaml"
+    assert "fitted model" in driver.find_element(By.ID, "fit-cv").text
     shots = _shots()
     if shots:
         driver.save_screenshot(str(shots / "fit.png"))
+    # a failed fit clears the last result: no estimates, no download, no pictures; the error names the control
+    broken = tmp_path / "broken.csv"
+    broken.write_text("x_m,mass_g\n0,1\n0.5,2\n")
+    driver.find_element(By.ID, "trays").send_keys(str(broken))
+    driver.find_element(By.ID, "start").click()
+    _wait(driver, "return document.getElementById('error').textContent")
+    error = driver.find_element(By.ID, "error").text
+    assert error.startswith("tray test:") and "--trays" not in error, error
+    assert driver.find_elements(By.ID, "estimates") == [] and driver.find_elements(By.CSS_SELECTOR, "#download a") == []
+    assert driver.execute_script("return document.getElementById('pattern').data === undefined")
+    assert driver.execute_script("return document.body.dataset.fitted === undefined")
 
 
 def _settled(driver, timeout: float = WAIT_S):
     """Wait until the page shows a settled answer (full or precise) for its controls, nothing in flight."""
-    _wait(driver, "return document.body.dataset.stale === 'no' && ['full', 'precise'].includes("
-                  "document.body.dataset.mode) && window.__requests.every(r => r.ended !== null)", timeout)
+    _wait(driver, browser.SETTLED, timeout)
 
 
 def _cli_json(shown: dict) -> dict:
