@@ -290,7 +290,11 @@ def test_a_fast_drag_aborts_superseded_requests(server, driver):
 
 
 LAYOUT_CHECKS = """
-const out = {scroll: document.documentElement.scrollWidth - window.innerWidth, small: [], overlaps: []};
+const out = {scroll: document.documentElement.scrollWidth - window.innerWidth, small: [], overlaps: [],
+  unnamed: [...document.querySelectorAll('input, select')].filter(el => !el.labels.length
+    && !el.getAttribute('aria-label')).map(el => el.id)};
+for (const el of document.querySelectorAll('#controls input'))
+  if (!el.getAttribute('aria-label')) out.unnamed.push(el.id);
 const walker = document.createTreeWalker(document.body, NodeFilter.SHOW_TEXT);
 while (walker.nextNode()) {
   const node = walker.currentNode, el = node.parentElement;
@@ -328,6 +332,7 @@ def test_the_layout_fits_a_phone_and_a_desktop(server, driver, size):
         assert found["scroll"] <= 0, f"horizontal scroll of {found['scroll']} px at {width} px"
         assert found["small"] == [], found["small"]
         assert found["overlaps"] == [], found["overlaps"]
+        assert found["unnamed"] == [], found["unnamed"]  # every slider and field has an accessible name
         columns = driver.execute_script("return getComputedStyle(document.getElementById('figures'))"
                                         ".gridTemplateColumns.split(' ').length")
         assert columns == (1 if phone else 2)
@@ -364,3 +369,22 @@ def test_the_pattern_page_prints_its_record(server, driver):
             driver.save_screenshot(str(shots / "pattern-print.png"))
     finally:
         driver.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": ""})
+
+
+def test_a_cv_above_the_curves_scale_stays_on_the_picture(server, driver):
+    """At a working width far beyond the pattern the CV at the width is over the plotted range: its marker is
+    pinned at the top with its value written beside it (it vanished)."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    driver.get(server + "/")
+    _settled(driver)
+    width = driver.find_element(By.CSS_SELECTOR, 'input[type=number][data-key="pattern.target_swath_m"]')
+    width.send_keys(Keys.CONTROL, "a")
+    width.send_keys(width.get_attribute("max"), Keys.TAB)
+    _settled(driver)
+    cv = driver.execute_script("return window.__shown.metrics.cv_percent_at_target")
+    marker = driver.execute_script("const g = document.getElementById('curve'); const t = g.data.find(t => "
+                                   "t.name.startsWith('CV at')); return [t.y[0], g.layout.yaxis.range[1], t.text]")
+    assert cv > marker[1], "the case needs a CV over the scale"
+    assert marker[0] <= marker[1] and marker[2] and f"{cv:.1f} %" in marker[2][0]
