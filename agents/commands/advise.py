@@ -40,33 +40,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the advice as JSON")
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="write advice.json, fitted.yaml (the fitted scene at the test's settings) and "
-                             "advised.yaml (at the advised settings and width) into DIR, once the advice is done")
+                             "advised.yaml (at the advised settings and width) into DIR, once the advice is done "
+                             "(the output-folder rule: never over an input, nothing left by a failed run)")
+    arguments.force_flag(parser)
 
 
-def check_out(out: Path, inputs: list[Path]) -> None:
-    """`--out DIR`: a folder (or a path where one can be made) whose files would not replace an input."""
-    from spreadgym.errors import SpreadgymError
-
-    if out.exists() and not out.is_dir():
-        raise SpreadgymError(f"--out {out}: a file, not a folder")
-    targets = {(out / name).resolve() for name in ADVICE_FILES}
-    for path in inputs:
-        if path.exists() and path.resolve() in targets:
-            raise SpreadgymError(f"--out {out}: would replace the input {path}; give another folder")
-
-
-def write_out(out: Path, data: dict, fitted_yaml: str, advised_yaml: str) -> list[Path]:
-    """The advice's files, each written whole (a temporary file renamed over it)."""
+def write_out(folder: Path, data: dict, fitted_yaml: str, advised_yaml: str) -> list[Path]:
+    """The advice's files in `folder`, each written whole."""
     import json
 
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name, text in zip(ADVICE_FILES, (json.dumps(data, indent=2) + "\n", fitted_yaml, advised_yaml)):
-        partial = out / f".{name}.partial"
-        partial.write_text(text, encoding="utf-8")
-        partial.replace(out / name)
-        written.append(out / name)
-    return written
+    from spreadgym.out_folder import write_atomic
+
+    texts = (json.dumps(data, indent=2) + "\n", fitted_yaml, advised_yaml)
+    return [write_atomic(folder / name, text) for name, text in zip(ADVICE_FILES, texts)]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,25 +63,31 @@ def run(args: argparse.Namespace) -> int:
     from spreadgym.config.scene import load_scene, scene_with
     from spreadgym.fit.outputs import payload, predict, scene_yaml
     from spreadgym.fit.trays import read_trays
+    from spreadgym.out_folder import OutFolder, named_files
     from spreadgym.report import print_json
     from spreadgym.threads import set_threads
 
     if args.threads is not None:
         set_threads(args.threads)
-    scene = load_scene(args.scene, parse_assignments(args.overrides))
+    overrides = parse_assignments(args.overrides)
+    scene = load_scene(args.scene, overrides)
     check_width(args.width, scene)
+    out = None
     if args.out is not None:
-        check_out(args.out, [Path(args.trays), Path(args.scene)])
+        out = OutFolder(args.out, "advise", files=ADVICE_FILES, inputs=named_files(args.trays, args.scene),
+                        force=args.force, replaces_own=False)
+        out.check()
     test = read_trays(args.trays, scene.pattern.tray_width_m)
     advice = advise(scene, test, args.width, fit=args.fit or DEFAULT_FIT, budget=args.budget, granules=args.granules,
-                    fit_granules=args.fit_granules, seed=args.seed,
+                    fit_granules=args.fit_granules, seed=args.seed, fixed=overrides,
                     progress=lambda text: print(f"{text} ...", file=sys.stderr))
     data = advice_payload(advice, payload(advice.fit, predict(advice.fit), None))
-    if args.out is not None:
+    if out is not None:
         advised = scene_with(advice.fit.fitted_scene, {**advice.advised, "pattern.target_swath_m": args.width})
         advised_yaml = (f"# {advised.name} fitted to {test.source}, at the advised settings for {args.width:g} m\n"
                         + yaml.safe_dump(advised.model_dump(mode="json"), sort_keys=False))
-        data["files"] = [str(p) for p in write_out(args.out, data, scene_yaml(advice.fit), advised_yaml)]
+        with out.writing() as folder:
+            data["files"] = [str(p) for p in write_out(folder, data, scene_yaml(advice.fit), advised_yaml)]
     if args.json:
         print_json(data)
     else:
