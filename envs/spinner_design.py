@@ -25,11 +25,11 @@ from gymnasium import spaces
 
 from spreadgym.config.scene import Scene
 from spreadgym.envs.common import reward as rewards
-from spreadgym.envs.common.actions import check_action
+from spreadgym.envs.common.actions import Settings, check_action
 from spreadgym.envs.common.base_env import SpreadgymEnv
 from spreadgym.envs.common.config import DESIGN
 from spreadgym.envs.common.render import draw_frame, frame_lines
-from spreadgym.envs.common.task import SEED_BOUND, check_reset_options, info_metrics
+from spreadgym.envs.common.task import SEED_BOUND, Batch, check_reset_options, info_metrics
 
 
 class SpinnerDesignEnv(SpreadgymEnv):
@@ -43,6 +43,7 @@ class SpinnerDesignEnv(SpreadgymEnv):
         self.reward_bounds = rewards.design_reward_bounds(self.config.reward)
         self._scene: Optional[Scene] = None
         self._sim_seed = 0
+        self._batch: Optional[Batch] = None  # the hidden batch of the robust variant
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
@@ -53,6 +54,7 @@ class SpinnerDesignEnv(SpreadgymEnv):
             check_reset_options(options)
             if "context" in options:
                 context = self.task.replace_context(context, options["context"])
+        self._batch = self.task.sample_batch(context, self.np_random)
         self._context = context
         self._scene = self.task.context_scene(context)
         self._context_info = self.task.context_info(context)
@@ -61,13 +63,17 @@ class SpinnerDesignEnv(SpreadgymEnv):
             self.render()
         return self.task.encode_context(context, self._scene), {"context": copy.deepcopy(self._context_info)}
 
+    def design_scene(self, action) -> tuple[Scene, Settings]:
+        """The scene `step(action)` runs (the action checked as `step` checks it) and its settings."""
+        unit = check_action(action, self.task.settings_map.size)
+        settings = self.task.settings_map.to_settings(unit)
+        return self.task.settings_scene(self._scene, settings, self._sim_seed, self._batch), settings
+
     def step(self, action):
         if self._context is None:
             raise gym.error.ResetNeeded("call reset() before step()")
-        unit = check_action(action, self.task.settings_map.size)
-        settings = self.task.settings_map.to_settings(unit)
-        scene = self.task.settings_scene(self._scene, settings, self._sim_seed)
-        result = self.task.run(scene, rendering=self.render_mode is not None)
+        scene, settings = self.design_scene(action)
+        result = self.task.run(scene, rendering=self.render_mode is not None, batch=self._batch)
         score = rewards.score(result.metrics, self.config.reward)
         reward = rewards.design_reward(score)
         self._last = (scene, result, settings, score, reward)
@@ -78,6 +84,8 @@ class SpinnerDesignEnv(SpreadgymEnv):
             "reward_terms": score.as_dict(),
             "sim_seed": self._sim_seed,
         }
+        if self._batch is not None:
+            info["batch"] = self._batch.as_dict()
         if self.render_mode == "human":
             self.render()
         return self.task.encode_context(self._context, self._scene), reward, True, False, info
