@@ -41,14 +41,14 @@ from spreadgym.agents.baselines import ACTION_METHODS, SEARCHES, run_baseline, s
 from spreadgym.agents.evaluation import EvalContext, Row, evaluation_set, make_env, run_policy, score_action
 
 EPISODES = 2  # scoring episodes per job and run
-SEARCH_BUDGET = 200  # simulations per job for random search, CMA-ES and TPE (the searches' default)
+SEARCH_BUDGET = 100  # simulations per job for random search, CMA-ES and TPE (half the compare default: CPU)
 TRAIN_STEPS = 15_000  # env steps (= simulations) of each PPO and SAC run
 TRAIN_GRANULES = 1000  # granules per training simulation (scoring uses the env default, 2048)
 TRAIN_SETTINGS = {  # on top of configs/agents/<algo>.yaml: one env process per run (the shipped 2 x 128 rollout)
     "ppo": {"n_envs": 1, "n_steps": 256, "env_kwargs": {"granules": TRAIN_GRANULES}},
     "sac": {"n_envs": 1, "gradient_steps": 1, "env_kwargs": {"granules": TRAIN_GRANULES}},
 }
-REFERENCE_BUDGET = 1000  # CMA-ES simulations per job for the best known setting (5 x the searches')
+REFERENCE_BUDGET = 500  # CMA-ES simulations per job for the best known setting (5 x the searches')
 REFERENCE_EPISODES = 8  # scoring samples of the best known setting
 RANDOM_ACTIONS = 32  # random actions whose mean reward is a job's 0
 REFERENCE_SEED = 7
