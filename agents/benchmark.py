@@ -106,6 +106,22 @@ def budget_of(method: str) -> dict:
 
 # -- files -----------------------------------------------------------------------------------
 
+REFERENCES_FILE = "benchmark_references.yaml"
+"""Each v1 design task's per-job references (configs/), written by `spreadgym bench --only
+rl-benchmark` when every rung's are complete; `spreadgym compare` normalises with them."""
+
+
+def shipped_references(env_id: str) -> Optional[dict]:
+    """The shipped references of `env_id` (any spelling), or None."""
+    from spreadgym.agents.evaluation import canonical_env_id
+    from spreadgym.config.resources import config_dir, read_yaml
+
+    path = config_dir() / REFERENCES_FILE
+    if not path.is_file():
+        return None
+    return (read_yaml(path) or {}).get(canonical_env_id(env_id))
+
+
 def write_json(path: Path, payload) -> Path:
     """Write `payload` whole or not at all (a temporary file renamed into place)."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -362,6 +378,108 @@ def run_rung(out: Path, rung: Rung, methods: Optional[Sequence[str]] = None, par
                 if not score_path(out, rung, method, seed).is_file():
                     progress(f"{rung.key}: scoring {method} seed {seed}")
                     score_run(out, rung, method, seed, env, jobs)
+
+
+def rung_speed(rung: Rung, designs: int = 32, repeats: int = 3) -> dict:
+    """Env steps per second of `rung` at its scoring settings: one env at one thread (one
+    core), and its native vector env of `designs` sub-envs (fewer where the landing-point
+    budget says so) at every thread spreadgym may use (all cores, same-step autoreset);
+    medians of `repeats` interleaved blocks of `designs` random steps, with their ranges.
+    The plate rung, at seconds a step, is timed on blocks of 2."""
+    import gymnasium as gym
+
+    from spreadgym import threads
+    from spreadgym.config.scene import MAX_GRANULE_COPIES, granule_copies
+    from spreadgym.studies.benchmarks import interleaved_rates
+
+    env = gym.make(rung.env_id)
+    batch = min(designs, MAX_GRANULE_COPIES // granule_copies(env.unwrapped.task.base_scene))
+    if rung.pending:
+        batch = designs = 2
+    venv = gym.make_vec(rung.env_id, num_envs=batch, autoreset_mode="same_step")
+    env.reset(seed=0)
+    venv.reset(seed=0)
+    env.action_space.seed(0)
+    venv.action_space.seed(0)
+
+    def one_by_one():
+        for _ in range(batch):
+            env.step(env.action_space.sample())
+            env.reset()
+
+    series = {("one env", 1, 1): one_by_one,
+              ("vector env", batch, threads.thread_count()): lambda: venv.step(venv.action_space.sample())}
+    rows, _ = interleaved_rates(series, batch, repeats)
+    env.close()
+    venv.close()
+    one, vector = rows
+    return {"steps_per_s_one_core": one["designs_per_s"], "steps_per_s_one_core_low": one["designs_per_s_low"],
+            "steps_per_s_one_core_high": one["designs_per_s_high"], "steps_per_s_all_cores": vector["designs_per_s"],
+            "steps_per_s_all_cores_low": vector["designs_per_s_low"],
+            "steps_per_s_all_cores_high": vector["designs_per_s_high"], "cores": vector["threads"],
+            "vector_batch": batch}
+
+
+def benchmark_rows(out: Path, docs: Path, progress: Callable[[str], None] = print, speed_repeats: int = 3,
+                   run: bool = True) -> list[dict]:
+    """`make bench`, section rl-benchmark: run what the benchmark still lacks (resumable, under
+    `out`), then the baseline table, one row per (rung, method), with each rung's steps/s.
+    Writes the profiles (`docs/<rung>-profiles.png`), the table (`docs/rl-benchmark.md`) and
+    the references `spreadgym compare` normalises with (configs/benchmark_references.yaml) only
+    when every rung that runs is complete; otherwise a SpreadgymError lists what is missing."""
+    from spreadgym.agents.evaluation import canonical_env_id
+    from spreadgym.config.resources import config_dir
+    from spreadgym.errors import SpreadgymError
+
+    if run:
+        for rung in RUNGS.values():
+            run_rung(out, rung, progress=progress)
+    rows, missing, references = [], [], {}
+    for rung in RUNGS.values():
+        progress(f"{rung.key}: steps/s")
+        speed = rung_speed(rung, repeats=speed_repeats)
+        if rung.pending:
+            rows.append({"rung": rung.key, "env": rung.env_id, "method": f"(runs wait: {rung.pending})", **speed})
+            continue
+        found = rung_table(out, rung)
+        if found is None:
+            missing.append(rung.key)
+            continue
+        table, matrices = found
+        rows += [{**row, **speed} for row in table]
+        plot_profiles(matrices, docs / "rl-benchmark" / f"{rung.key}-profiles.png", TITLES)
+        references[canonical_env_id(rung.env_id)] = read_json(out / rung.key / "reference.json")
+    if missing:
+        raise SpreadgymError(f"rl-benchmark: rungs {', '.join(missing)} are not complete under {out}; "
+                             "run the section again (it resumes) and nothing is written until they are")
+    import yaml
+
+    with open(config_dir() / REFERENCES_FILE, "w", encoding="utf-8") as handle:
+        handle.write("# Per-job references of the benchmark's normalised scores (docs/benchmark.md), written by\n"
+                     "# `spreadgym bench --only rl-benchmark`: 0 = random_reward, 1 = best_reward.\n")
+        yaml.safe_dump(references, handle, sort_keys=False, width=120)
+    (docs / "rl-benchmark.md").write_text(markdown(rows), encoding="utf-8")
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    """The baseline table as markdown: IQM [95 % CI] of the normalised reward and of the CV."""
+    head = ("| rung | method | runs | normalised IQM [95 % CI] | CV IQM (%) [95 % CI] | mean reward | sims to decide "
+            "/ job | training sims (granules) | training min (median) | steps/s one core | steps/s all cores |")
+    lines = [head, "|" + "---|" * 11]
+    for r in rows:
+        if "iqm" not in r:
+            lines.append(f"| {r['rung']} | {r['method']} | - | - | - | - | - | - | - | "
+                         f"{r['steps_per_s_one_core']:.2f} | {r['steps_per_s_all_cores']:.2f} |")
+            continue
+        train = (f"{r['training_simulations']} ({r['training_granules']})" if r["training_simulations"] else "0")
+        minutes = f"{r['training_wall_s_median'] / 60:.1f}" if r.get("training_wall_s_median") else "-"
+        lines.append(
+            f"| {r['rung']} | {r['method']} | {r['runs']} | {r['iqm']:.3f} [{r['iqm_low']:.3f}, {r['iqm_high']:.3f}] "
+            f"| {r['cv_iqm_percent']:.2f} [{r['cv_iqm_low']:.2f}, {r['cv_iqm_high']:.2f}] | {r['reward_mean']:.4f} "
+            f"| {r['decide_simulations_per_job']} | {train} | {minutes} | {r['steps_per_s_one_core']:.1f} "
+            f"| {r['steps_per_s_all_cores']:.1f} |")
+    return "\n".join(lines) + "\n"
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -80,6 +80,20 @@ def load_any_policy(given, env_id: Optional[str] = None) -> Policy:
     return Policy(algo, text, _predictor(model, None), env_id or DEFAULT_ENV, {}, "sb3")
 
 
+def model_files(given) -> list[str]:
+    """The files a `--model` value names (for an output folder that must not write over its
+    inputs): the model file or run folder's model.zip, or a callable's .py file; a leading
+    `LABEL=` (compare) is left out."""
+    text = str(given)
+    labelled = re.match(r"^([\w.-]+)=(.+)$", text)
+    text = labelled.group(2) if labelled and not Path(text).exists() else text
+    match = CALLABLE.match(text)
+    if match and not Path(text).exists():
+        return [match["module"]] if match["module"].endswith(".py") else []
+    path = Path(text)
+    return [str(path / "model.zip" if path.is_dir() else path)]
+
+
 def _same_task(env_id: str) -> str:
     from spreadgym.agents.evaluation import canonical_env_id
 
@@ -105,7 +119,7 @@ def _callable_policy(module: str, name: str, text: str, env_id: Optional[str]) -
     def act(obs):
         return np.asarray(function(obs), dtype=np.float32)
 
-    return Policy(name, text, act, env_id or DEFAULT_ENV, {}, "callable")
+    return Policy(text, text, act, env_id or DEFAULT_ENV, {}, "callable")
 
 
 def _check_sb3_zip(file: Path, given) -> None:
