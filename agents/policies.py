@@ -32,11 +32,10 @@ from spreadgym.errors import SpreadgymError
 
 DEFAULT_ENV = "spreadgym/SpinnerDesign-v1"
 CALLABLE = re.compile(r"^(?P<module>[\w.]+|.+\.py):(?P<name>[A-Za-z_]\w*)$")
-SB3_ALGOS = {  # the module of a saved policy class -> the algorithm class that loads it
-    "stable_baselines3.ppo": ("stable_baselines3", "PPO"), "stable_baselines3.sac": ("stable_baselines3", "SAC"),
-    "stable_baselines3.td3": ("stable_baselines3", "TD3"), "stable_baselines3.a2c": ("stable_baselines3", "A2C"),
-    "stable_baselines3.ddpg": ("stable_baselines3", "TD3"), "sb3_contrib.tqc": ("sb3_contrib", "TQC"),
-}
+SB3_ALGOS = {"ppo": ("stable_baselines3", "PPO"), "a2c": ("stable_baselines3", "A2C"),
+             "sac": ("stable_baselines3", "SAC"), "td3": ("stable_baselines3", "TD3"),
+             "ddpg": ("stable_baselines3", "DDPG"), "tqc": ("sb3_contrib", "TQC")}
+"""Algorithms with a continuous action (the envs' Box): name -> (package, class)."""
 
 
 @dataclass
@@ -130,19 +129,30 @@ def _check_sb3_zip(file: Path, given) -> None:
             raise SpreadgymError(f"--model {given}: not a saved stable-baselines3 policy (no data/policy.pth)")
 
 
-def _load_sb3(file: Path, given):
-    """(algo name, model) of a plain SB3 zip: the algorithm from its saved policy class."""
+def _algo_of(data: dict) -> Optional[str]:
+    """The algorithm of a saved SB3 model's `data`: its policy class's module names it (SAC,
+    TD3, TQC); the on-policy ones share ActorCriticPolicy, and PPO alone saves a clip range."""
+    module = str((data.get("policy_class") or {}).get("__module__", ""))
+    for name in ("sac", "td3", "tqc"):
+        if module.endswith(f".{name}.policies"):
+            return name
+    if module == "stable_baselines3.common.policies":
+        return "ppo" if "clip_range" in data else "a2c"
+    return None
+
+
+def _load_sb3(file: Path, given, algo: Optional[str] = None):
+    """(algo name, model) of an SB3 zip: `algo` where known (zoo's args.yml), else read from the file."""
     with zipfile.ZipFile(file) as zf:
         try:
             data = json.loads(zf.read("data"))
         except ValueError:
             raise SpreadgymError(f"--model {given}: its data entry is not JSON") from None
-    module = str((data.get("policy_class") or {}).get("__module__", ""))
-    found = next((algo for prefix, algo in SB3_ALGOS.items() if module.startswith(prefix)), None)
-    if found is None:
-        raise SpreadgymError(f"--model {given}: the policy class's module {module!r} is none of "
-                             f"{', '.join(SB3_ALGOS)}")
-    package, cls = found
+    algo = algo or _algo_of(data)
+    if algo not in SB3_ALGOS:
+        module = (data.get("policy_class") or {}).get("__module__")
+        raise SpreadgymError(f"--model {given}: not a model of {', '.join(SB3_ALGOS)} (policy class from {module!r})")
+    package, cls = SB3_ALGOS[algo]
     import os
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -204,7 +214,7 @@ def _zoo_policy(file: Path, params: Path, text: str) -> Policy:
     if not isinstance(env_id, str):
         raise SpreadgymError(f"--model {text}: {params / 'args.yml'} names no env")
     env_kwargs = args.get("env_kwargs") or {}
-    algo, model = _load_sb3(file, text)
+    algo, model = _load_sb3(file, text, str(args.get("algo", "")).lower() or None)
     obs_rms = None
     stats = params / "vecnormalize.pkl"
     if stats.is_file():
