@@ -25,6 +25,7 @@ spreadgym.agents.benchmark` runs parts of it; `spreadgym bench --only rl-benchma
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -276,8 +277,8 @@ def aggregate(score_dict: dict[str, np.ndarray], reps: int = BOOTSTRAP_REPS, see
     def all_aggregates(scores):
         return np.array([func(scores) for func in funcs.values()])
 
-    with warnings.catch_warnings():  # rliable hands arch a RandomState, which arch 7 calls deprecated
-        warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)
+    with warnings.catch_warnings(), _global_numpy_seed(seed):
+        warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)  # rliable -> arch 7
         points, intervals = rly.get_interval_estimates(dict(score_dict), all_aggregates, reps=reps,
                                                        random_state=np.random.RandomState(seed))
     return {method: {name: (float(points[method][k]), float(intervals[method][0, k]),
@@ -289,8 +290,21 @@ def profiles(score_dict: dict[str, np.ndarray], taus=PROFILE_TAUS, reps: int = B
     """rliable's performance profiles: the share of (run, job) scores above each tau, with 95 % intervals."""
     from rliable import library as rly
 
-    np.random.seed(0)  # rliable's profile bootstrap draws from numpy's global generator
-    return rly.create_performance_profile(dict(score_dict), taus, reps=reps)
+    with _global_numpy_seed(0):
+        return rly.create_performance_profile(dict(score_dict), taus, reps=reps)
+
+
+@contextlib.contextmanager
+def _global_numpy_seed(seed: int):
+    """numpy's global generator seeded for the block, then restored: rliable's stratified
+    bootstrap draws its resamples from it (`np.random.choice`; the `random_state` it takes
+    does not reach them), so a seeded call gives the same intervals every time."""
+    state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
 
 
 def plot_profiles(score_dict: dict[str, np.ndarray], path: Path, titles: Optional[dict] = None) -> Path:
