@@ -1,4 +1,5 @@
-"""`spreadgym/SpinnerDesign-v0`: choose the spinner settings for a job, one step per episode.
+"""`spreadgym/SpinnerDesign-v1` (and its ladder of rungs): choose the spinner settings for a
+job, one step per episode.
 
 `reset` draws a job (the context) with the env's `np_random`; the observation is the
 normalised context. The action sets rpm, vane pitch and the angles of adjustable
@@ -11,7 +12,22 @@ target swath (as a number of trays), the forward speed, the wind (x, y) and then
 seed `sim.seed` of the granule sample, all from `np_random`. The same reset seed and
 the same actions give the same observations, rewards and infos bit for bit.
 A step after the end of an episode re-runs the same job with the same granule
-sample (useful for black-box optimisers: common random numbers).
+sample (useful for black-box optimisers: common random numbers). On the robust rung,
+reset then draws the episode's hidden batch (`Task.sample_batch`).
+
+Version history:
+    v1: the benchmark's tasks (docs/benchmark.md), one namespaced id each:
+        SpinnerDesign (the first rung), SpinnerDesignPitch (one pitch per vane),
+        SpinnerDesignTwin (two discs and the drop point), SpinnerDesignWind (forward speed
+        and wind), SpinnerDesignPlates (adjustable deflector plates), SpinnerDesignRobust
+        (a hidden batch from the variability model). Continuous target widths with
+        held-out bands, a held-out fertilizer, evaluation jobs checked disjoint from the
+        training contexts, an observation of the material properties (no one-hot) and of
+        the job entries that vary, gymnasium's passive checker on.
+    v0: (deprecated, kept working) three fertilizers x nine widths on the tray grid, the
+        evaluation jobs among the training contexts, three ids, the checker off. Over
+        its life the model behind it changed (analytic, then the compiled full model, the
+        bias-corrected CV, the default budget) under the same id.
 """
 
 from __future__ import annotations
@@ -33,7 +49,8 @@ from spreadgym.envs.common.task import SEED_BOUND, Batch, check_reset_options, i
 
 
 class SpinnerDesignEnv(SpreadgymEnv):
-    """Choose rpm, vane pitch and deflector angles for a sampled job; one step per episode."""
+    """Choose rpm, vane pitch and deflector angles for a sampled job; one step per episode
+    (the module docstring has the version history)."""
 
     config_name = DESIGN
 

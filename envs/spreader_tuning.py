@@ -1,4 +1,5 @@
-"""`spreadgym/SpreaderTuning-v0`: calibrate a spreader the way a tray test does, over several steps.
+"""`spreadgym/SpreaderTuning-v1` (and SpreaderTuningHard-v1): calibrate a spreader the way a
+tray test does, over several steps.
 
 `reset` draws a job (as in SpinnerDesign), sets the initial settings (config
 `initial_settings`) and runs a first tray test. Each `step` changes the settings by
@@ -20,6 +21,17 @@ Observation (float32, every entry in [-1, 1]), in this order:
     bout                     `bout_bins` bins over one bout at the target swath: the
                              overlapped tray masses re-binned, divided by their mean and by
                              2, clipped to [0, 1] (0.5 = the mean)
+
+Start rule (`start: unsolved`, v1): random initial settings are redrawn while the first
+tray test already meets the goal, at most `start_draws` times; every draw is a tray test
+(`info["tray_tests"]`), and `info["start_solved"]` says whether all of them met it.
+
+Version history:
+    v1: the jobs of SpinnerDesign-v1 (held-out widths and fertilizer for evaluation), the
+        unsolved start rule (v0 started solved in about half its episodes), the harder
+        SpreaderTuningHard-v1 (goal 10 % in 30 tray tests), the passive checker on, the
+        TimeLimit checked against `max_steps`.
+    v0: (deprecated, kept working) starts drawn without a rule, three ids, the checker off.
 """
 
 from __future__ import annotations
