@@ -259,7 +259,7 @@ def test_rllib_trains_one_iteration_with_the_namespaced_id():
         import spreadgym.envs
         from ray.rllib.algorithms.ppo import PPOConfig
         spreadgym.envs.register_rllib()
-        config = (PPOConfig().environment("spreadgym/SpinnerDesign-v0", env_config={"granules": 32})
+        config = (PPOConfig().environment("spreadgym/SpinnerDesign-v1", env_config={"granules": 32})
                   .env_runners(num_env_runners=1, sample_timeout_s=600)  # a loaded CI machine: no empty sample
                   .training(train_batch_size=16, minibatch_size=8, num_epochs=1))
         algo = config.build_algo()
