@@ -14,9 +14,10 @@ that of `gym.make(id).reset(seed=s + i)` followed by the same actions, with a pl
 Speed: the tray tests of one step run as one batch (spreadgym.spread.batch: every
 granule of every sub-env's design in one parallel kernel, the rest of the scenes side by
 side on spreadgym.threads' threads), with the same bits as one run each; each sub-env's
-`step` then takes its own result. Three cases step each sub-env itself: runs pooled to a
-`precision`, a render mode (the frames need the disc paths), and the robust variant (each
-episode's hidden batch has its own material library). docs/performance.md has the rates.
+`step` then takes its own result. Two cases step each sub-env itself: runs pooled to a
+`precision` and a render mode (the frames need the disc paths). The robust variant's
+hidden batches run together, in one library holding every episode's fertilizer copy.
+docs/benchmark.md has every rung's rates.
 
 Size: `num_envs` x the landing points of one run (sim.granules x sim.angle_copies x
 discs) is bounded by the budget `spreadgym simulate` has (MAX_GRANULE_COPIES): one step
@@ -41,6 +42,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from spreadgym.config.scene import check_pooled_work
+from spreadgym.envs.common.task import batches_library
 from spreadgym.envs.spinner_design import SpinnerDesignEnv
 from spreadgym.errors import ConfigError
 from spreadgym.spread.batch import run_batch
@@ -167,11 +169,13 @@ class SpinnerDesignVectorEnv(VectorEnv):
         sub-env's `step` will ask for (its action checked as `step` checks it), run
         together; the shared task then hands each sub-env its result in turn."""
         task = self.task
-        if not batched(self.envs[0]):
+        stepping = [i for i, env in enumerate(self.envs)
+                    if not self._autoreset[i] and env._context is not None]  # one that needs a reset fails in step
+        library = batches_library(task.library, [self.envs[i]._batch for i in stepping])
+        if not batched(self.envs[0]) or library is None:
             return
-        scenes = [env.design_scene(actions[i])[0] for i, env in enumerate(self.envs)
-                  if not self._autoreset[i] and env._context is not None]  # one that needs a reset fails in step
-        results = run_batch(scenes, model=task.cfg.model, library=task.library, ci=task.cfg.confidence_interval)
+        scenes = [self.envs[i].design_scene(actions[i])[0] for i in stepping]
+        results = run_batch(scenes, model=task.cfg.model, library=library, ci=task.cfg.confidence_interval)
         task.run = _Prefetched(scenes, results)  # step() below takes them; then Task.run again
 
     def close_extras(self, **kwargs: Any):
@@ -188,7 +192,7 @@ class _Prefetched:
 
     def __call__(self, scene, rendering: bool = False, batch=None):
         expected, result = self.pending.pop(0)
-        if rendering or batch is not None or scene != expected:
+        if rendering or scene != expected:  # a hidden batch is in the scene (its fertilizer copy, its contacts)
             raise RuntimeError("the vector env's batch and its sub-envs' steps disagree")
         return result
 
@@ -202,13 +206,16 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
     base = env.unwrapped
     task = base.task
     if not batched(base):
-        return [(env.reset(seed=seed, options=options), env.step(action))[1]
-                for (seed, options), action in zip(resets, actions)]
-    scenes = []
+        return _one_by_one(env, resets, actions)
+    scenes, batches = [], []
     for (seed, options), action in zip(resets, actions):
         env.reset(seed=seed, options=options)
         scenes.append(base.design_scene(action)[0])
-    results = run_batch(scenes, model=task.cfg.model, library=task.library, ci=task.cfg.confidence_interval)
+        batches.append(base._batch)
+    library = batches_library(task.library, batches)
+    if library is None:
+        return _one_by_one(env, resets, actions)
+    results = run_batch(scenes, model=task.cfg.model, library=library, ci=task.cfg.confidence_interval)
     task.run = _Prefetched(scenes, results)
     try:
         steps = []
@@ -220,11 +227,17 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
         task.__dict__.pop("run", None)  # back to Task.run
 
 
+def _one_by_one(env, resets, actions) -> list[tuple]:
+    return [(env.reset(seed=seed, options=options), env.step(action))[1]
+            for (seed, options), action in zip(resets, actions)]
+
+
 def batched(env: SpinnerDesignEnv) -> bool:
     """Whether `env`'s steps can run as one batch: not pooled to a precision, not rendering
-    (the frames need disc paths), no hidden batch (its own material library per episode)."""
+    (the frames need disc paths). Hidden batches run together in one library holding each
+    episode's fertilizer copy (`batches_library`)."""
     cfg = env.task.cfg
-    return cfg.precision is None and env.render_mode is None and cfg.variability is None
+    return cfg.precision is None and env.render_mode is None
 
 
 def _sharing_task(env: SpinnerDesignEnv) -> SpinnerDesignEnv:

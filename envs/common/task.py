@@ -12,6 +12,7 @@ with `swath_draw: continuous`), the forward speed and the wind (x, y) from the e
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import dataclass
 from typing import Any, Optional
 
@@ -77,7 +78,9 @@ def job_tray_width_m(target_swath_m: float, tray_width_m: float) -> float:
 @dataclass(frozen=True)
 class Batch:
     """The hidden batch of one episode (robust variant): a variability draw and the
-    library holding its fertilizer copy (particle density scaled)."""
+    library holding its fertilizer copy (particle density scaled), named after the draw
+    (`<fertilizer>~<crc32 of the draw>`), so that the copies of many episodes can share
+    one library (`batches_library`) and their tray tests run as one batch."""
 
     draw: Draw
     library: MaterialLibrary
@@ -86,6 +89,23 @@ class Batch:
         out = {name: float(self.draw.factors[name]) for name in FACTORS}
         out[OFFSETS[0]] = float(math.degrees(self.draw.pitch_offset_rad))
         return out
+
+
+def batches_library(library: MaterialLibrary, batches: list) -> Optional[MaterialLibrary]:
+    """`library` with the fertilizer copies of every hidden batch in `batches` (None where an
+    episode has none), or None when two different copies share a name (then each episode
+    runs with its own library)."""
+    extra: dict = {}
+    for batch in batches:
+        if batch is None:
+            continue
+        for name, fertilizer in batch.library.fertilizers.items():
+            if name in library.fertilizers:
+                continue
+            if name in extra and extra[name] != fertilizer:
+                return None
+            extra[name] = fertilizer
+    return MaterialLibrary(fertilizers={**library.fertilizers, **extra}, surfaces=library.surfaces)
 
 
 def to_unit(value: float, lo: float, hi: float) -> float:
@@ -224,7 +244,8 @@ class Task:
         variability = self.cfg.variability
         if variability is None:
             return None
-        draw = draw_from_unit(variability, rng.uniform(-1.0, 1.0, len(FACTORS) + len(OFFSETS)), 0, 0)
+        unit = rng.uniform(-1.0, 1.0, len(FACTORS) + len(OFFSETS))
+        draw = draw_from_unit(variability, unit, zlib.crc32(unit.tobytes()), 0)
         return Batch(draw, draw_library(self.library, context.fertilizer, [draw]))
 
     def replace_context(self, context: Context, given: Any) -> Context:

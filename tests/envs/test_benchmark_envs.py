@@ -285,15 +285,23 @@ def test_the_vector_env_renders_one_frame_per_sub_env():
         gym.make_vec("spreadgym/SpinnerDesign-v1", num_envs=2, render_mode="human", **SMALL)
 
 
-def test_the_robust_vector_env_equals_its_single_envs():
+def test_the_robust_rung_runs_its_hidden_batches_as_one_batch_with_the_single_envs_bits():
+    """The vector env and the searches' `step_designs` put every episode's fertilizer copy in
+    one library and run the designs together: the same rewards as one env at a time."""
+    from spreadgym.envs.vector import step_designs
+
     venv = gym.make_vec("spreadgym/SpinnerDesignRobust-v1", num_envs=3, autoreset_mode="same_step", **SMALL)
     venv.reset(seed=20)
     actions = np.random.default_rng(1).uniform(-1, 1, (3, 2)).astype(np.float32)
     _, rewards, *_ = venv.step(actions)
+    env = gym.make("spreadgym/SpinnerDesignRobust-v1", **SMALL)
+    singles = []
     for i in range(3):
-        env = gym.make("spreadgym/SpinnerDesignRobust-v1", **SMALL)
         env.reset(seed=20 + i)
-        assert env.step(actions[i])[1] == rewards[i]
+        singles.append(env.step(actions[i])[1])
+    assert list(rewards) == singles
+    batch = step_designs(env, [(20 + i, None) for i in range(3)], list(actions))
+    assert [step[1] for step in batch] == singles
 
 
 def test_num_envs_is_bounded_by_the_landing_point_budget():
