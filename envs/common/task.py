@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Optional
 
 import numpy as np
@@ -105,7 +105,7 @@ def batches_library(library: MaterialLibrary, batches: list) -> Optional[Materia
             if name in extra and extra[name] != fertilizer:
                 return None
             extra[name] = fertilizer
-    return MaterialLibrary(fertilizers={**library.fertilizers, **extra}, surfaces=library.surfaces)
+    return replace(library, fertilizers={**library.fertilizers, **extra})
 
 
 def to_unit(value: float, lo: float, hi: float) -> float:

@@ -79,7 +79,7 @@ def draw_library(library: MaterialLibrary, fertilizer: str, cell_draws: list[Dra
     extra = {draw_name(fertilizer, d): replace(base, name=draw_name(fertilizer, d),
                                                particle_density_kg_m3=base.particle_density_kg_m3
                                                * d.factors["density"]) for d in cell_draws}
-    return MaterialLibrary(fertilizers={**library.fertilizers, **extra}, surfaces=library.surfaces)
+    return replace(library, fertilizers={**library.fertilizers, **extra})
 
 
 def perturbed(scene: Scene, settings: dict, draw: Draw, library: MaterialLibrary) -> dict:
