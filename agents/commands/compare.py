@@ -21,7 +21,6 @@ DEFAULT_METHODS = ("published", "random", "grid", "cmaes", "optuna")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
-    from spreadgym.envs.common.config import DESIGN, load_env_config
 
     parser.add_argument("--model", action="append", metavar="[LABEL=]MODEL",
                         help="a policy: a spreadgym train run (DIR or DIR/model.zip), an rl_zoo3 or "
@@ -40,7 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
                         help="scoring episodes per job and run, each on another granule sample (default 1)")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
-                        help=f"granules per simulation (default: the env's, {load_env_config(DESIGN).granules})")
+                        help="granules per simulation (default: the env's, the scene's sim.granules, 2048 on the "
+                             "paper scene)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
     parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
                         help="target swaths (default: the env's evaluation jobs; v0: 2 3 4 5)")

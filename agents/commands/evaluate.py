@@ -11,7 +11,6 @@ from spreadgym.cli import arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from spreadgym.envs.common.config import DESIGN, load_env_config
 
     parser.add_argument("--model", required=True, metavar="MODEL",
                         help="a spreadgym train run (DIR or DIR/model.zip), an rl_zoo3 or stable-baselines3 model "
@@ -22,8 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
                         help="episodes per job, each on another granule sample (default 1)")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
-                        help=f"granules per simulation (default: the env's, {load_env_config(DESIGN).granules}, "
-                             "whatever training used)")
+                        help="granules per simulation (default: the env's, the scene's sim.granules, 2048 on the "
+                             "paper scene, whatever training used)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
     parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
                         help="target swaths (default: the env's evaluation jobs; v0: 2 3 4 5)")
