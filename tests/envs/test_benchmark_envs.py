@@ -145,6 +145,20 @@ def test_the_robust_rung_hides_a_batch_drawn_from_the_variability_model():
     assert again.step(action)[4]["batch"] == info["batch"]
 
 
+def test_the_robust_rung_keeps_its_model_at_the_edges_of_the_action_box():
+    """A hidden batch can put the top rpm 2 % and the pitch 1 deg past the action ranges, outside
+    the envelope where `auto` picks the compiled model: the rung runs the compiled model
+    throughout (with `auto` some episodes there would switch to pymunk)."""
+    env = gym.make("spreadgym/SpinnerDesignRobust-v1", **SMALL)
+    auto = gym.make("spreadgym/SpinnerDesignRobust-v1", model="auto", **SMALL)
+    models, auto_models = set(), set()
+    for seed in range(12):
+        for made, found in ((env, models), (auto, auto_models)):
+            made.reset(seed=seed)
+            found.add(made.step(np.ones(2, dtype=np.float32))[4]["metrics"]["model"])
+    assert models == {"compiled"} and "pymunk" in auto_models
+
+
 def test_the_robust_rung_refuses_an_unknown_half_range():
     with pytest.raises(ConfigError, match="variability.*unknown key"):
         gym.make("spreadgym/SpinnerDesignRobust-v1", variability={"humidity": 0.1}, **SMALL)
