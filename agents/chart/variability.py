@@ -1,6 +1,6 @@
 """The variability model of a robust chart cell (configs/chart_variability.yaml): the
 model itself (draws, their scene overrides, the library of perturbed densities) is the
-core's `spreadgym.config.variability`; this module adds what a chart cell does with it.
+core's `spreadgym.spread.variability`; this module adds what a chart cell does with it.
 
 A cell's draws are a scrambled Sobol set seeded from the cell's seed sequence, each with
 its own granule seed, and every candidate of the cell is scored on the same draws
@@ -15,7 +15,8 @@ from typing import Any, Mapping, Optional, Union
 import numpy as np
 
 from spreadgym.config.resources import read_yaml
-from spreadgym.config.variability import (  # noqa: F401  (the chart's names for the model)
+from spreadgym.errors import SpreadgymError
+from spreadgym.spread.variability import (  # noqa: F401  (the chart's names for the model)
     FACTORS,
     OFFSETS,
     Draw,
@@ -26,7 +27,6 @@ from spreadgym.config.variability import (  # noqa: F401  (the chart's names for
     draw_name,
     perturbed,
 )
-from spreadgym.errors import SpreadgymError
 
 COUNTS = {"draws": (2, 1024), "verify_draws": (2, 1024), "verify_runs_per_draw": (1, 8)}  # integers, ranges
 

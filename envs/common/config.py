@@ -255,7 +255,7 @@ class DesignConfig(StrictModel):
     def _variability(cls, v):
         if v is None:
             return None
-        from spreadgym.config.variability import FACTORS, OFFSETS, check_half_range, default_variability
+        from spreadgym.spread.variability import FACTORS, OFFSETS, check_half_range, default_variability
 
         known = FACTORS + OFFSETS
         merged = {key: float(value) for key, value in default_variability().items() if key in known}

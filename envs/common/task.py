@@ -21,7 +21,6 @@ import numpy as np
 from spreadgym.config.base import brief
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import MIN_BOUT_TRAYS, Scene, load_scene, scene_with
-from spreadgym.config.variability import FACTORS, OFFSETS, Draw, draw_from_unit, draw_library, perturbed
 from spreadgym.envs.common.actions import Settings, SettingsMap
 from spreadgym.envs.common.config import DesignConfig
 from spreadgym.errors import ConfigError, MaterialError
@@ -30,6 +29,7 @@ from spreadgym.physics.selection import choose_model
 from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.pipeline import SimulationResult, run_scene
 from spreadgym.spread.precision import simulate_precisely
+from spreadgym.spread.variability import FACTORS, OFFSETS, Draw, draw_from_unit, draw_library, perturbed
 
 SEED_BOUND = 2**31 - 1
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import spreadgym  # noqa: F401  (registers the ids)
-from spreadgym.config.variability import FACTORS, default_variability
 from spreadgym.envs.common.task import job_tray_width_m
 from spreadgym.envs.registration import ENVS, ID_FORMS, LADDER, TASKS
 from spreadgym.errors import ConfigError
+from spreadgym.spread.variability import FACTORS, default_variability
 
 SMALL = {"granules": 48}
 DESIGN_RUNGS = [f"spreadgym/{name}" for name in LADDER]
