@@ -40,6 +40,15 @@ def test_rliable_iqm_equals_the_hand_computed_one_on_a_small_table():
     assert again == found  # seeded
 
 
+def test_probability_of_improvement_equals_the_hand_counted_share():
+    """Two jobs; on the first every run of x beats every run of y (1), on the second x's runs
+    (1, 0) meet y's (1, 1, -1) in 6 pairs: 2 wins, 2 ties (half each), 2 losses (1/2): the mean is 3/4."""
+    x = np.array([[2.0, 1.0], [3.0, 0.0]])
+    y = np.array([[0.0, 1.0], [1.0, 1.0], [1.5, -1.0]])
+    point, low, high = bm.probability_of_improvement(x, y, reps=300)
+    assert point == pytest.approx(3 / 4) and low <= point <= high and low < high
+
+
 def test_normalised_scores_are_0_at_the_random_action_and_1_at_the_best_setting():
     assert bm.normalise(-0.4, -0.4, -0.05) == 0.0
     assert bm.normalise(-0.05, -0.4, -0.05) == pytest.approx(1.0)
