@@ -104,8 +104,8 @@ class ContextConfig(StrictModel):
             raise ValueError("held_out_swath_m needs swath_draw: continuous (bands of a tray grid would be "
                              "a few tray counts; list them as evaluation jobs instead)")
         lo, hi = self.target_swath_m
-        free = sum(max(0.0, min(b, hi) - max(a, lo)) for a, b in _merged(self.held_out_swath_m))
-        if self.held_out_swath_m and free >= hi - lo:
+        covered = sum(max(0.0, min(b, hi) - max(a, lo)) for a, b in _merged(self.held_out_swath_m))
+        if self.held_out_swath_m and covered >= hi - lo:
             raise ValueError(f"held_out_swath_m leaves nothing of target_swath_m [{lo}, {hi}] to train on")
         return self
 
