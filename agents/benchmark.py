@@ -360,7 +360,9 @@ def rung_table(out: Path, rung: Rung) -> Optional[tuple[list[dict], dict]]:
     rows = []
     for method, found in runs.items():
         budget = budget_of(method)
-        train_wall = [r["train"].get("wall_s_last_invocation") for r in found if r.get("train")]  # no run resumed
+        trained = [r["train"] for r in found if r.get("train")]
+        train_wall = [t.get("wall_s_last_invocation") for t in trained]  # no run resumed
+        train_steps = sorted({int(t["num_timesteps"]) for t in trained})  # PPO: whole rollouts, 59 x 256 = 15104
         rows.append({
             "rung": rung.key, "env": rung.env_id, "method": TITLES.get(method, method), "key": method,
             "runs": len(found), "jobs": matrices[method].shape[1], "episodes_per_job": EPISODES,
@@ -371,7 +373,7 @@ def rung_table(out: Path, rung: Rung) -> Optional[tuple[list[dict], dict]]:
             "cv_iqm_high": cv_stats[method]["iqm"][2],
             "reward_mean": float(np.mean(score_matrix(found, references, "reward"))),
             "decide_simulations_per_job": budget["decide_simulations"],
-            "training_simulations": budget["training_simulations"],
+            "training_simulations": train_steps[-1] if train_steps else budget["training_simulations"],
             "training_granules": budget["training_granules"],
             "training_wall_s_median": float(np.median(train_wall)) if train_wall else None,
             "decide_wall_s_per_job": float(np.mean([r["wall_s"] for r in found])) / matrices[method].shape[1],
@@ -495,7 +497,8 @@ def benchmark_rows(out: Path, docs: Path, progress: Callable[[str], None] = prin
                      "# `spreadgym bench --only rl-benchmark`: 0 = random_reward, 1 = best_reward.\n")
         yaml.safe_dump(references, handle, sort_keys=False, width=120)
     (docs / "rl-benchmark.md").write_text(markdown(rows), encoding="utf-8")
-    return rows
+    keys = list(dict.fromkeys(key for row in rows for key in row))  # one set of columns for the CSV
+    return [{key: row.get(key) for key in keys} for row in rows]
 
 
 def markdown(rows: list[dict]) -> str:
