@@ -180,8 +180,9 @@ def optuna_search(objective: Objective, dim: int, budget: int = DEFAULT_BUDGET, 
 
 
 SEARCHES = {"random": random_search, "grid": grid_search, "cmaes": cmaes_search, "optuna": optuna_search}
-METHOD_TITLES = {"published": "published settings", "random": "random search", "grid": "grid search",
-                 "cmaes": "CMA-ES", "optuna": "Optuna TPE"}
+METHOD_TITLES = {"published": "published settings", "centre": "centre action", "random-action": "random action",
+                 "random": "random search", "grid": "grid search", "cmaes": "CMA-ES", "optuna": "Optuna TPE"}
+RANDOM_ACTION_SEED = 30_000
 
 
 @dataclass
@@ -271,13 +272,29 @@ def search_job(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGET,
     return best, used, time.perf_counter() - started
 
 
-def run_baseline(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGET, seed: int = 0,
-                 episodes: int = 1) -> list[Row]:
-    """Search (or take the published settings) and score the result: one Row per episode."""
+ACTION_METHODS = ("published", "centre", "random-action")
+"""Methods that decide without simulating: the scene's own settings, the centre of the
+action box, a uniformly random action (seeded by the run's seed and the job)."""
+
+
+def fixed_action(env, ctx: EvalContext, method: str, seed: int) -> np.ndarray:
+    """The action of a method of ACTION_METHODS on job `ctx` in run `seed`."""
     from spreadgym.agents.evaluation import published_action
 
     if method == "published":
-        action, used, decide_s, extra = published_action(env), 0, 0.0, {}
+        return published_action(env)
+    if method == "centre":
+        return np.zeros(env.action_space.shape)
+    rng = np.random.default_rng([RANDOM_ACTION_SEED, int(seed), ctx.index])
+    return rng.uniform(-1.0, 1.0, env.action_space.shape)
+
+
+def run_baseline(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGET, seed: int = 0,
+                 episodes: int = 1, first_episode: int = 0) -> list[Row]:
+    """Search (or take a fixed action) and score the result: one Row per episode, scored on
+    episodes `first_episode`, ... (their scoring samples, the same for every method)."""
+    if method in ACTION_METHODS:
+        action, used, decide_s, extra = fixed_action(env, ctx, method, seed), 0, 0.0, {}
     else:
         best, used, decide_s = search_job(env, ctx, method, budget, seed)
         action = best.x
@@ -285,7 +302,7 @@ def run_baseline(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGE
         extra = {"search_best_reward": best.mean_reward, "search_best_cv_percent": cv,
                  "search_best_cv_se_percent": cv_se, "search_rescores": len(best.rewards)}
     rows = []
-    for episode in range(episodes):
+    for episode in range(first_episode, first_episode + episodes):
         row = score_action(env, ctx, action, method, episode=episode, search_simulations=used,
                            decide_s=decide_s)
         row.extra.update(extra)

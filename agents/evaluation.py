@@ -37,7 +37,6 @@ from spreadgym.report import format_table
 
 DESIGN_ENV = "spreadgym:SpinnerDesign-v0"
 TUNING_ENV = "spreadgym:SpreaderTuning-v0"
-ENV_NAMES = ("SpinnerDesign-v0", "SpreaderTuning-v0")
 
 # The paper's three fertilizers (the material library's granular products) and the swaths.
 EVAL_FERTILIZERS = ("mixture-17-21-17", "compound-10-16-10", "pellet")
@@ -52,19 +51,25 @@ WORST_CV_PERCENT = 100.0  # the CV a run counts as when nothing landed on the tr
 
 
 def canonical_env_id(env_id: str) -> str:
-    """`spreadgym:NAME-v0` for any of the accepted spellings; unknown ids are an error."""
+    """The form of a spreadgym id that works in any process, for any accepted spelling:
+    `spreadgym:spreadgym/NAME-v1` for the v1 tasks, `spreadgym:NAME-v0` for the deprecated
+    v0 ones (as saved runs name them). Unknown ids are an error listing the known ones."""
+    from spreadgym.envs.registration import ENVS, TASKS
+
     name = env_id
     for prefix in ("spreadgym:", "spreadgym/"):
         if name.startswith(prefix):
             name = name[len(prefix):]
-    if name not in ENV_NAMES:
-        known = ", ".join(f"spreadgym:{n}" for n in ENV_NAMES)
-        raise SpreadgymError(f"unknown environment id {env_id!r}; known: {known}")
-    return f"spreadgym:{name}"
+    if name in TASKS:
+        return f"spreadgym:spreadgym/{name}"
+    if name in ENVS:
+        return f"spreadgym:{name}"
+    known = ", ".join([*(f"spreadgym/{n}" for n in TASKS), *(f"spreadgym:{n}" for n in ENVS)])
+    raise SpreadgymError(f"unknown environment id {env_id!r}; known: {known}")
 
 
 def is_tuning(env_id: str) -> bool:
-    return canonical_env_id(env_id) == TUNING_ENV
+    return "SpreaderTuning" in canonical_env_id(env_id)
 
 
 @dataclass(frozen=True)
@@ -74,14 +79,21 @@ class EvalContext:
     index: int
     fertilizer: str
     target_swath_m: float
+    spinner_material: str = EVAL_SPINNER_MATERIAL
+    forward_speed_m_s: float = 0.0
+    wind_m_s: tuple = (0.0, 0.0)
 
     @property
     def label(self) -> str:
-        return f"{self.fertilizer} @ {self.target_swath_m:g} m"
+        extra = "" if self.spinner_material == EVAL_SPINNER_MATERIAL else f" on {self.spinner_material}"
+        if self.forward_speed_m_s or any(self.wind_m_s):
+            extra += f", {self.forward_speed_m_s:g} m/s, wind ({self.wind_m_s[0]:g}, {self.wind_m_s[1]:g})"
+        return f"{self.fertilizer} @ {self.target_swath_m:g} m{extra}"
 
     def as_dict(self) -> dict:
         return {"fertilizer": self.fertilizer, "target_swath_m": float(self.target_swath_m),
-                "spinner_material": EVAL_SPINNER_MATERIAL, "forward_speed_m_s": 0.0, "wind_m_s": [0.0, 0.0]}
+                "spinner_material": self.spinner_material, "forward_speed_m_s": float(self.forward_speed_m_s),
+                "wind_m_s": [float(self.wind_m_s[0]), float(self.wind_m_s[1])]}
 
     def options(self) -> dict:
         return {"context": self.as_dict()}
@@ -95,8 +107,20 @@ class EvalContext:
 
 
 def evaluation_set(fertilizers: Optional[Sequence[str]] = None,
-                   swaths_m: Optional[Sequence[float]] = None) -> list[EvalContext]:
-    """The jobs: every fertilizer with every target swath (fertilizer-major order)."""
+                   swaths_m: Optional[Sequence[float]] = None, env=None) -> list[EvalContext]:
+    """The jobs. An env whose config has an `evaluation` section (every v1 task) gives its
+    held-out jobs, restricted to `fertilizers` and `swaths_m` where given; otherwise (v0)
+    every fertilizer with every target swath (fertilizer-major order), by default the
+    paper's three fertilizers at 2, 3, 4 and 5 m."""
+    held_out = env.unwrapped.task.evaluation_jobs if env is not None else []
+    if held_out:
+        picked = [job for job in held_out if (not fertilizers or job.fertilizer in fertilizers)
+                  and (not swaths_m or any(abs(job.target_swath_m - float(w)) < 1e-9 for w in swaths_m))]
+        if not picked:
+            raise SpreadgymError("no evaluation job of the env matches --fertilizers/--swaths; its jobs: "
+                                 + ", ".join(sorted({f"{j.fertilizer} @ {j.target_swath_m:g} m" for j in held_out})))
+        return [EvalContext(i, j.fertilizer, j.target_swath_m, j.spinner_material, j.forward_speed_m_s,
+                            tuple(j.wind_m_s)) for i, j in enumerate(picked)]
     ferts = tuple(fertilizers) if fertilizers else EVAL_FERTILIZERS
     swaths = tuple(float(s) for s in swaths_m) if swaths_m else EVAL_SWATHS_M
     jobs = [(f, s) for f in ferts for s in swaths]
@@ -125,8 +149,8 @@ class SimulationCounter(gym.Wrapper):
 
     def reset(self, **kwargs):
         out = self.env.reset(**kwargs)
-        if self.counts_reset:
-            self.simulations += 1
+        if self.counts_reset:  # a start rule may run several tray tests (info["tray_tests"])
+            self.simulations += int(out[1].get("tray_tests", 1))
         return out
 
     def step(self, action):

@@ -72,7 +72,8 @@ def action_to_settings(env, action) -> dict:
 
 
 def register_rllib() -> None:
-    """Register the `spreadgym/...` and `spreadgym:...` ids with Ray Tune's env registry.
+    """Register every spreadgym id (v1: `spreadgym/NAME-v1` and `spreadgym:spreadgym/NAME-v1`; v0:
+    both its forms) with Ray Tune's env registry.
 
     RLlib's env runners are fresh processes; env ids registered this way reach them
     as creators that import spreadgym first. `env_config` becomes `gym.make` kwargs.
@@ -80,11 +81,12 @@ def register_rllib() -> None:
     """
     from ray.tune.registry import register_env
 
-    from spreadgym.envs.registration import ENVS
+    from spreadgym.envs.registration import ENVS, TASKS
 
-    for name in ENVS:
-        for env_id in (f"spreadgym/{name}", f"spreadgym:{name}"):
-            register_env(env_id, functools.partial(_rllib_env, env_id))
+    ids = [f"spreadgym/{name}" for name in TASKS] + [f"spreadgym:spreadgym/{name}" for name in TASKS]
+    ids += [f"spreadgym/{name}" for name in ENVS] + [f"spreadgym:{name}" for name in ENVS]  # v0, deprecated
+    for env_id in ids:
+        register_env(env_id, functools.partial(_rllib_env, env_id))
 
 
 def _rllib_env(env_id: str, env_config: Mapping[str, Any]):

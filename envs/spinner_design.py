@@ -1,4 +1,5 @@
-"""`spreadgym/SpinnerDesign-v0`: choose the spinner settings for a job, one step per episode.
+"""`spreadgym/SpinnerDesign-v1` (and its ladder of rungs): choose the spinner settings for a
+job, one step per episode.
 
 `reset` draws a job (the context) with the env's `np_random`; the observation is the
 normalised context. The action sets rpm, vane pitch and the angles of adjustable
@@ -11,7 +12,22 @@ target swath (as a number of trays), the forward speed, the wind (x, y) and then
 seed `sim.seed` of the granule sample, all from `np_random`. The same reset seed and
 the same actions give the same observations, rewards and infos bit for bit.
 A step after the end of an episode re-runs the same job with the same granule
-sample (useful for black-box optimisers: common random numbers).
+sample (useful for black-box optimisers: common random numbers). On the robust rung,
+reset then draws the episode's hidden batch (`Task.sample_batch`).
+
+Version history:
+    v1: the benchmark's tasks (docs/benchmark.md), one namespaced id each:
+        SpinnerDesign (the first rung), SpinnerDesignPitch (one pitch per vane),
+        SpinnerDesignTwin (two discs and the drop point), SpinnerDesignWind (forward speed
+        and wind), SpinnerDesignPlates (adjustable deflector plates), SpinnerDesignRobust
+        (a hidden batch from the variability model). Continuous target widths with
+        held-out bands, a held-out fertilizer, evaluation jobs checked disjoint from the
+        training contexts, an observation of the material properties (no one-hot) and of
+        the job entries that vary, gymnasium's passive checker on.
+    v0: (deprecated, kept working) three fertilizers x nine widths on the tray grid, the
+        evaluation jobs among the training contexts, three ids, the checker off. Over
+        its life the model behind it changed (analytic, then the compiled full model, the
+        bias-corrected CV, the default budget) under the same id.
 """
 
 from __future__ import annotations
@@ -25,15 +41,16 @@ from gymnasium import spaces
 
 from spreadgym.config.scene import Scene
 from spreadgym.envs.common import reward as rewards
-from spreadgym.envs.common.actions import check_action
+from spreadgym.envs.common.actions import Settings, check_action
 from spreadgym.envs.common.base_env import SpreadgymEnv
 from spreadgym.envs.common.config import DESIGN
 from spreadgym.envs.common.render import draw_frame, frame_lines
-from spreadgym.envs.common.task import SEED_BOUND, check_reset_options, info_metrics
+from spreadgym.envs.common.task import SEED_BOUND, Batch, check_reset_options, info_metrics
 
 
 class SpinnerDesignEnv(SpreadgymEnv):
-    """Choose rpm, vane pitch and deflector angles for a sampled job; one step per episode."""
+    """Choose rpm, vane pitch and deflector angles for a sampled job; one step per episode
+    (the module docstring has the version history)."""
 
     config_name = DESIGN
 
@@ -43,6 +60,7 @@ class SpinnerDesignEnv(SpreadgymEnv):
         self.reward_bounds = rewards.design_reward_bounds(self.config.reward)
         self._scene: Optional[Scene] = None
         self._sim_seed = 0
+        self._batch: Optional[Batch] = None  # the hidden batch of the robust variant
 
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
@@ -53,6 +71,7 @@ class SpinnerDesignEnv(SpreadgymEnv):
             check_reset_options(options)
             if "context" in options:
                 context = self.task.replace_context(context, options["context"])
+        self._batch = self.task.sample_batch(context, self.np_random)
         self._context = context
         self._scene = self.task.context_scene(context)
         self._context_info = self.task.context_info(context)
@@ -61,13 +80,17 @@ class SpinnerDesignEnv(SpreadgymEnv):
             self.render()
         return self.task.encode_context(context, self._scene), {"context": copy.deepcopy(self._context_info)}
 
+    def design_scene(self, action) -> tuple[Scene, Settings]:
+        """The scene `step(action)` runs (the action checked as `step` checks it) and its settings."""
+        unit = check_action(action, self.task.settings_map.size)
+        settings = self.task.settings_map.to_settings(unit)
+        return self.task.settings_scene(self._scene, settings, self._sim_seed, self._batch), settings
+
     def step(self, action):
         if self._context is None:
             raise gym.error.ResetNeeded("call reset() before step()")
-        unit = check_action(action, self.task.settings_map.size)
-        settings = self.task.settings_map.to_settings(unit)
-        scene = self.task.settings_scene(self._scene, settings, self._sim_seed)
-        result = self.task.run(scene, rendering=self.render_mode is not None)
+        scene, settings = self.design_scene(action)
+        result = self.task.run(scene, rendering=self.render_mode is not None, batch=self._batch)
         score = rewards.score(result.metrics, self.config.reward)
         reward = rewards.design_reward(score)
         self._last = (scene, result, settings, score, reward)
@@ -78,6 +101,8 @@ class SpinnerDesignEnv(SpreadgymEnv):
             "reward_terms": score.as_dict(),
             "sim_seed": self._sim_seed,
         }
+        if self._batch is not None:
+            info["batch"] = self._batch.as_dict()
         if self.render_mode == "human":
             self.render()
         return self.task.encode_context(self._context, self._scene), reward, True, False, info

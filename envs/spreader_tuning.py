@@ -1,4 +1,5 @@
-"""`spreadgym/SpreaderTuning-v0`: calibrate a spreader the way a tray test does, over several steps.
+"""`spreadgym/SpreaderTuning-v1` (and SpreaderTuningHard-v1): calibrate a spreader the way a
+tray test does, over several steps.
 
 `reset` draws a job (as in SpinnerDesign), sets the initial settings (config
 `initial_settings`) and runs a first tray test. Each `step` changes the settings by
@@ -20,6 +21,17 @@ Observation (float32, every entry in [-1, 1]), in this order:
     bout                     `bout_bins` bins over one bout at the target swath: the
                              overlapped tray masses re-binned, divided by their mean and by
                              2, clipped to [0, 1] (0.5 = the mean)
+
+Start rule (`start: unsolved`, v1): random initial settings are redrawn while the first
+tray test already meets the goal, at most `start_draws` times; every draw is a tray test
+(`info["tray_tests"]`), and `info["start_solved"]` says whether all of them met it.
+
+Version history:
+    v1: the jobs of SpinnerDesign-v1 (held-out widths and fertilizer for evaluation), the
+        unsolved start rule (v0 started solved in about half its episodes), the harder
+        SpreaderTuningHard-v1 (goal 10 % in 30 tray tests), the passive checker on, the
+        TimeLimit checked against `max_steps`.
+    v0: (deprecated, kept working) starts drawn without a rule, three ids, the checker off.
 """
 
 from __future__ import annotations
@@ -37,7 +49,7 @@ from spreadgym.envs.common.actions import check_action
 from spreadgym.envs.common.base_env import SpreadgymEnv
 from spreadgym.envs.common.config import TUNING
 from spreadgym.envs.common.render import draw_frame, frame_lines
-from spreadgym.envs.common.task import SEED_BOUND, check_reset_options, info_metrics
+from spreadgym.envs.common.task import SEED_BOUND, Batch, check_reset_options, info_metrics
 from spreadgym.spread import pattern
 
 SUMMARY_NAMES = ["cv", "swath", "landed", "steps_left"]
@@ -99,12 +111,12 @@ class SpreaderTuningEnv(SpreadgymEnv):
         self._context_obs = np.zeros(self.task.context_size, dtype=np.float32)
         self._unit = np.zeros(smap.size)
         self._steps = 0
+        self._batch: Optional[Batch] = None  # the hidden batch of a robust variant
 
     # -- gymnasium API -----------------------------------------------------------------
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         super().reset(seed=seed)
         self._context = self._last = None  # a reset that fails leaves an env that needs one
-        smap = self.task.settings_map
         context = self.task.sample_context(self.np_random)
         if options:
             check_reset_options(options)
@@ -115,17 +127,20 @@ class SpreaderTuningEnv(SpreadgymEnv):
         self._scene = self.task.context_scene(context)
         self._context_info = self.task.context_info(context)
         self._context_obs = self.task.encode_context(context, self._scene)
-        mode = self.config.initial_settings
-        if mode == "random":
-            self._unit = self.np_random.uniform(-1.0, 1.0, size=smap.size)
-        elif mode == "middle":
-            self._unit = np.zeros(smap.size)
-        else:
-            self._unit = smap.to_unit(smap.from_scene(self._scene))
+        self._batch = self.task.sample_batch(context, self.np_random)
         self._steps = 0
-        result, settings, score = self._tray_test()
+        tray_tests = 0
+        while True:  # the start rule: with `start: unsolved`, redraw a start that already meets the goal
+            self._unit = self._initial_unit()
+            result, settings, score = self._tray_test()
+            tray_tests += 1
+            redraw = self.config.start == "unsolved" and self._reached_goal(result)
+            if not redraw or tray_tests >= self.config.start_draws:
+                break
         self._last = (result.scene, result, settings, score, None)
         info = self._info(result, settings, score)
+        info["tray_tests"] = tray_tests
+        info["start_solved"] = self._reached_goal(result)
         if self.render_mode == "human":
             self.render()
         return self._observation(result, score), info
@@ -140,8 +155,7 @@ class SpreaderTuningEnv(SpreadgymEnv):
         self._unit = np.clip(self._unit + self.config.max_change * a, -1.0, 1.0)
         self._steps += 1
         result, settings, score = self._tray_test()
-        cv = result.metrics.cv_percent_at_target
-        terminated = bool(cv is not None and cv <= self.config.goal_cv_percent)
+        terminated = self._reached_goal(result)
         truncated = bool(not terminated and self._steps >= self.config.max_steps)
         self._ended = terminated or truncated
         reward = rewards.tuning_reward(score, self.config.reward, terminated)
@@ -162,12 +176,25 @@ class SpreaderTuningEnv(SpreadgymEnv):
         lines = frame_lines(self._context, settings, score, reward if reward is not None else float("nan"), extra)
         return draw_frame(scene, result, r.width_px, r.height_px, r.trajectories, lines)
 
-    # -- internals -----------------------------------------------------------------------
+    def _initial_unit(self) -> np.ndarray:
+        """The normalised settings of the first tray test (config `initial_settings`)."""
+        smap = self.task.settings_map
+        mode = self.config.initial_settings
+        if mode == "random":
+            return self.np_random.uniform(-1.0, 1.0, size=smap.size)
+        if mode == "middle":
+            return np.zeros(smap.size)
+        return smap.to_unit(smap.from_scene(self._scene))
+
+    def _reached_goal(self, result) -> bool:
+        cv = result.metrics.cv_percent_at_target
+        return bool(cv is not None and cv <= self.config.goal_cv_percent)
+
     def _tray_test(self):
         settings = self.task.settings_map.to_settings(self._unit)
         seed = int(self.np_random.integers(SEED_BOUND))
-        result = self.task.run(self.task.settings_scene(self._scene, settings, seed),
-                               rendering=self.render_mode is not None)
+        result = self.task.run(self.task.settings_scene(self._scene, settings, seed, self._batch),
+                               rendering=self.render_mode is not None, batch=self._batch)
         return result, settings, rewards.score(result.metrics, self.config.reward)
 
     def _observation(self, result, score: rewards.Score) -> np.ndarray:

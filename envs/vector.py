@@ -1,24 +1,35 @@
-"""`spreadgym/SpinnerDesign-v0` as a gymnasium `VectorEnv` (its registered `vector_entry_point`).
+"""The SpinnerDesign tasks as a gymnasium `VectorEnv` (their registered `vector_entry_point`).
 
-`gym.make_vec("spreadgym/SpinnerDesign-v0", num_envs=N, **kwargs)` builds this class: one
-`Task` (library, base scene, checks) shared by N sub-envs instead of N copies, a batch
-of actions in and stacked observations, rewards and infos out.
+`gym.make_vec("spreadgym/SpinnerDesign-v1", num_envs=N, **kwargs)` builds this class (any
+rung of the ladder, and the deprecated v0): one `Task` (library, base scene, checks) shared
+by N sub-envs instead of N copies, a batch of actions in and stacked observations, rewards
+and infos out.
 
 Same results as the single env: sub-env i is a `SpinnerDesignEnv` sharing the task,
-so with `reset(seed=s)` (sub-env i seeded s + i, as gymnasium's vector envs do) every
-observation, reward and info equals, bit for bit, that of `gym.make(id).reset(seed=s + i)`
-followed by the same actions, with a plain `reset()` after each episode.
+so with `reset(seed=s)` (sub-env i seeded s + i, as gymnasium's vector envs do; a list
+of N seeds seeds each its own) every observation, reward and info equals, bit for bit,
+that of `gym.make(id).reset(seed=s + i)` followed by the same actions, with a plain
+`reset()` after each episode.
 
 Speed: the tray tests of one step run as one batch (spreadgym.spread.batch: every
 granule of every sub-env's design in one parallel kernel, the rest of the scenes side by
 side on spreadgym.threads' threads), with the same bits as one run each; each sub-env's
-`step` then takes its own result. docs/performance.md has the measured rates.
+`step` then takes its own result. Two cases step each sub-env itself: runs pooled to a
+`precision` and a render mode (the frames need the disc paths). The robust variant's
+hidden batches run together, in one library holding every episode's fertilizer copy.
+docs/benchmark.md has every rung's rates.
 
-Autoreset: `autoreset_mode="next_step"` (gymnasium's default: the step after an
-episode's end resets that sub-env and ignores its action) or `"same_step"` (the
-sub-env is reset in the step that ends the episode; its last observation and info are
-in `info["final_obs"]` and `info["final_info"]`). SpinnerDesign ends every episode
-after one step, so "same_step" wastes no calls on resets.
+Size: `num_envs` x the landing points of one run (sim.granules x sim.angle_copies x
+discs) is bounded by the budget `spreadgym simulate` has (MAX_GRANULE_COPIES): one step
+holds every sub-env's result at once.
+
+Autoreset (`autoreset_mode`): "next_step" (gymnasium's default: the step after an
+episode's end resets that sub-env and ignores its action), "same_step" (the sub-env is
+reset in the step that ends the episode; its last observation and info are in
+`info["final_obs"]` and `info["final_info"]`; SpinnerDesign ends every episode after one
+step, so this wastes no calls on resets) or "disabled" (nothing resets by itself: reset
+the ended sub-envs with `reset(options={"reset_mask": mask})`, which resets those and
+keeps the others' observations; stepping an ended sub-env is an error).
 """
 
 from __future__ import annotations
@@ -30,16 +41,21 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from spreadgym.envs.common.actions import check_action
+from spreadgym.config.scene import check_pooled_work
+from spreadgym.envs.common.task import batches_library
 from spreadgym.envs.spinner_design import SpinnerDesignEnv
 from spreadgym.errors import ConfigError
 from spreadgym.spread.batch import run_batch
 
-MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP,
+         "disabled": AutoresetMode.DISABLED}
 
 
 class SpinnerDesignVectorEnv(VectorEnv):
     """`num_envs` SpinnerDesign sub-envs sharing one task; keyword arguments as `gym.make`."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": SpinnerDesignEnv.metadata["render_fps"],
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, autoreset_mode: str | AutoresetMode = "next_step",
                  render_mode: Optional[str] = None, **kwargs: Any):
@@ -48,18 +64,22 @@ class SpinnerDesignVectorEnv(VectorEnv):
         mode = autoreset_mode.name.lower() if isinstance(autoreset_mode, AutoresetMode) else autoreset_mode
         if mode not in MODES:
             raise ConfigError("autoreset_mode", f"unknown {autoreset_mode!r}; allowed: {sorted(MODES)}")
-        if render_mode is not None:
-            raise ConfigError("render_mode", "the vector env does not render; render a single env instead")
-        first = SpinnerDesignEnv(**kwargs)
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ConfigError("render_mode", f"unknown {render_mode!r}; the vector env renders rgb_array "
+                                             "(a tuple of frames, one per sub-env)")
+        first = SpinnerDesignEnv(render_mode=render_mode, **kwargs)
+        check_pooled_work(first.task.base_scene, int(num_envs), "num_envs")  # before N sub-envs exist
         self.envs = [first] + [_sharing_task(first) for _ in range(int(num_envs) - 1)]
         self.num_envs = int(num_envs)
-        self.metadata = {"autoreset_mode": MODES[mode]}
-        self.render_mode = None
+        self.metadata = {**self.metadata, "autoreset_mode": MODES[mode]}
+        self.render_mode = render_mode
         self.single_action_space = first.action_space
         self.single_observation_space = first.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)  # next_step: reset in the coming step
+        self._ended = np.zeros(self.num_envs, dtype=bool)  # disabled: ended and not reset since
+        self._observations = np.zeros(self.observation_space.shape, dtype=self.observation_space.dtype)
 
     @property
     def task(self):
@@ -67,32 +87,55 @@ class SpinnerDesignVectorEnv(VectorEnv):
         return self.envs[0].task
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: Optional[dict] = None):
-        """Reset every sub-env; an int seed s seeds sub-env i with s + i."""
-        super().reset(seed=seed)
-        if seed is None:
-            seeds = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"reset got {len(seeds)} seeds for num_envs={self.num_envs}")
-        observations, infos = [], {}
+        """Reset the sub-envs: every one, or those of `options["reset_mask"]` (a bool array of
+        num_envs entries; the others keep their observations). An int seed s seeds sub-env i
+        with s + i; a list gives each sub-env its own (None: unseeded)."""
+        seeds = self._seeds(seed)
+        options = dict(options) if options else {}
+        mask = self._reset_mask(options.pop("reset_mask")) if "reset_mask" in options else None
+        if isinstance(seed, (int, np.integer)):
+            super().reset(seed=int(seed))  # the vector env's own np_random, as gymnasium's
+        infos: dict = {}
         for i, (env, env_seed) in enumerate(zip(self.envs, seeds)):
-            obs, info = env.reset(seed=env_seed, options=options)
-            observations.append(obs)
-            infos = self._add_info(infos, info, i)
-        self._autoreset[:] = False
-        return np.stack(observations), infos
+            if mask is None or mask[i]:
+                self._observations[i], info = env.reset(seed=env_seed, options=options or None)
+                infos = self._add_info(infos, info, i)
+        reset = np.ones(self.num_envs, dtype=bool) if mask is None else mask
+        self._autoreset[reset] = False
+        self._ended[reset] = False
+        return self._observations.copy(), infos
+
+    def _seeds(self, seed) -> list[Optional[int]]:
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            return [int(seed) + i for i in range(self.num_envs)]
+        if not isinstance(seed, (list, tuple, np.ndarray)):
+            raise ValueError(f"seed must be an int, a list of num_envs={self.num_envs} ints or None, got {seed!r}")
+        seeds = list(seed)
+        if len(seeds) != self.num_envs:
+            raise ValueError(f"reset got {len(seeds)} seeds for num_envs={self.num_envs}")
+        return [None if s is None else int(s) for s in seeds]
+
+    def _reset_mask(self, mask) -> np.ndarray:
+        """`options["reset_mask"]` checked as gymnasium's vector envs check it."""
+        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (self.num_envs,):
+            raise ValueError(f"options['reset_mask'] must be a numpy bool array of shape ({self.num_envs},), "
+                             f"got {mask!r}")
+        if not mask.any():
+            raise ValueError("options['reset_mask'] resets nothing: it needs at least one True entry")
+        return mask
 
     def step(self, actions):
         actions = np.asarray(actions)
         if actions.shape[:1] != (self.num_envs,):
             raise ValueError(f"actions must have {self.num_envs} rows (one per sub-env), got shape {actions.shape}")
-        same_step = self.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+        mode = self.metadata["autoreset_mode"]
+        if mode is AutoresetMode.DISABLED and self._ended.any():
+            raise ValueError(f"sub-envs {np.flatnonzero(self._ended).tolist()} ended their episodes; autoreset is "
+                             "disabled: reset them first with reset(options={'reset_mask': mask})")
         self._run_designs(actions)
         try:
-            observations = []
             rewards = np.zeros(self.num_envs, dtype=np.float64)
             terminated = np.zeros(self.num_envs, dtype=bool)
             truncated = np.zeros(self.num_envs, dtype=bool)
@@ -102,30 +145,37 @@ class SpinnerDesignVectorEnv(VectorEnv):
                     obs, info = env.reset()
                 else:
                     obs, rewards[i], terminated[i], truncated[i], info = env.step(actions[i])
-                    if same_step and (terminated[i] or truncated[i]):
+                    if mode is AutoresetMode.SAME_STEP and (terminated[i] or truncated[i]):
                         infos = self._add_info(infos, {"final_obs": obs, "final_info": info}, i)
                         obs, info = env.reset()
-                observations.append(obs)
+                self._observations[i] = obs
                 infos = self._add_info(infos, info, i)
         finally:
             self.task.__dict__.pop("run", None)  # back to Task.run
-        if not same_step:
+        if mode is AutoresetMode.NEXT_STEP:
             self._autoreset = terminated | truncated
-        return np.stack(observations), rewards, terminated, truncated, infos
+        elif mode is AutoresetMode.DISABLED:
+            self._ended = terminated | truncated
+        return self._observations.copy(), rewards, terminated, truncated, infos
+
+    def render(self) -> Optional[tuple]:
+        """One frame per sub-env (render_mode="rgb_array"), as gymnasium's sync vector env gives them."""
+        if self.render_mode is None:
+            return None
+        return tuple(env.render() for env in self.envs)
 
     def _run_designs(self, actions: np.ndarray) -> None:
         """The tray tests of every sub-env that steps now, as one batch: the scene each
         sub-env's `step` will ask for (its action checked as `step` checks it), run
         together; the shared task then hands each sub-env its result in turn."""
         task = self.task
-        if task.cfg.precision is not None:  # runs pooled to a precision: each sub-env's own, in its step
+        stepping = [i for i, env in enumerate(self.envs)
+                    if not self._autoreset[i] and env._context is not None]  # one that needs a reset fails in step
+        library = batches_library(task.library, [self.envs[i]._batch for i in stepping])
+        if not batched(self.envs[0]) or library is None:
             return
-        scenes = []
-        for i, env in enumerate(self.envs):
-            if not self._autoreset[i] and env._context is not None:  # a sub-env that needs a reset fails in step
-                settings = task.settings_map.to_settings(check_action(actions[i], task.settings_map.size))
-                scenes.append(task.settings_scene(env._scene, settings, env._sim_seed))
-        results = run_batch(scenes, model=task.cfg.model, library=task.library, ci=task.cfg.confidence_interval)
+        scenes = [self.envs[i].design_scene(actions[i])[0] for i in stepping]
+        results = run_batch(scenes, model=task.cfg.model, library=library, ci=task.cfg.confidence_interval)
         task.run = _Prefetched(scenes, results)  # step() below takes them; then Task.run again
 
     def close_extras(self, **kwargs: Any):
@@ -140,9 +190,9 @@ class _Prefetched:
     def __init__(self, scenes: list, results: list) -> None:
         self.pending = list(zip(scenes, results))
 
-    def __call__(self, scene, rendering: bool = False):
+    def __call__(self, scene, rendering: bool = False, batch=None):
         expected, result = self.pending.pop(0)
-        if rendering or scene != expected:
+        if rendering or scene != expected:  # a hidden batch is in the scene (its fertilizer copy, its contacts)
             raise RuntimeError("the vector env's batch and its sub-envs' steps disagree")
         return result
 
@@ -151,19 +201,21 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
     """`env.reset(seed=seed, options=options)` then `env.step(action)` for each reset and
     action in turn, on one SpinnerDesign env (wrappers included): the same returns, bit
     for bit, with the tray tests run as one batch. Each job is reset twice: once to learn
-    the scene its step runs, once to step it. An env that pools runs to a precision or
-    renders steps each job itself."""
+    the scene its step runs, once to step it. An env that pools runs to a precision, renders
+    or hides a batch (the robust variant) steps each job itself (`batched`)."""
     base = env.unwrapped
     task = base.task
-    if task.cfg.precision is not None or base.render_mode is not None:
-        return [(env.reset(seed=seed, options=options), env.step(action))[1]
-                for (seed, options), action in zip(resets, actions)]
-    scenes = []
+    if not batched(base):
+        return _one_by_one(env, resets, actions)
+    scenes, batches = [], []
     for (seed, options), action in zip(resets, actions):
         env.reset(seed=seed, options=options)
-        settings = task.settings_map.to_settings(check_action(action, task.settings_map.size))
-        scenes.append(task.settings_scene(base._scene, settings, base._sim_seed))
-    results = run_batch(scenes, model=task.cfg.model, library=task.library, ci=task.cfg.confidence_interval)
+        scenes.append(base.design_scene(action)[0])
+        batches.append(base._batch)
+    library = batches_library(task.library, batches)
+    if library is None:
+        return _one_by_one(env, resets, actions)
+    results = run_batch(scenes, model=task.cfg.model, library=library, ci=task.cfg.confidence_interval)
     task.run = _Prefetched(scenes, results)
     try:
         steps = []
@@ -175,11 +227,24 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
         task.__dict__.pop("run", None)  # back to Task.run
 
 
+def _one_by_one(env, resets, actions) -> list[tuple]:
+    return [(env.reset(seed=seed, options=options), env.step(action))[1]
+            for (seed, options), action in zip(resets, actions)]
+
+
+def batched(env: SpinnerDesignEnv) -> bool:
+    """Whether `env`'s steps can run as one batch: not pooled to a precision, not rendering
+    (the frames need disc paths). Hidden batches run together in one library holding each
+    episode's fertilizer copy (`batches_library`)."""
+    cfg = env.task.cfg
+    return cfg.precision is None and env.render_mode is None
+
+
 def _sharing_task(env: SpinnerDesignEnv) -> SpinnerDesignEnv:
     """A sub-env with `env`'s (read-only) task and config and a state of its own."""
     other = copy.copy(env)
     other._np_random = None
     other._np_random_seed = None
-    other._context = other._scene = other._last = other._viewer = None
+    other._context = other._scene = other._last = other._viewer = other._batch = None
     other._context_info = {}
     return other

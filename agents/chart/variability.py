@@ -1,47 +1,34 @@
-"""The variability model of a robust chart cell: how a real batch of fertilizer and a
-machine set by hand differ from the nominal scene (configs/chart_variability.yaml).
+"""The variability model of a robust chart cell (configs/chart_variability.yaml): the
+model itself (draws, their scene overrides, the library of perturbed densities) is the
+core's `spreadgym.spread.variability`; this module adds what a chart cell does with it.
 
-A draw is one perturbed batch: factors on the disc and vane friction, the restitution
-(disc and vanes alike), the median granule size and the particle density, a factor on
-the disc speed and an offset of the vane pitch, each uniform within its half-range. A
-cell's draws are a scrambled Sobol set seeded from the cell's seed sequence, each with
+A cell's draws are a scrambled Sobol set seeded from the cell's seed sequence, each with
 its own granule seed, and every candidate of the cell is scored on the same draws
 (common random numbers), so two candidates differ by their settings only.
-
-The perturbations map onto scene keys: `contact.disc_friction`, `contact.vane_friction`,
-`contact.disc_restitution`, `contact.vane_restitution` (the nominal values are the
-scene's resolved pairs), `granule.diameter_m` (the nominal d50), `spinner.rpm` and
-`vanes.pitch_deg` (the candidate's settings). The density has no scene key: each draw
-gets its own copy of the fertilizer in a library made for the cell (`draw_library`),
-named `<fertilizer>~<draw>`, with the scaled particle density.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping, Optional, Union
 
 import numpy as np
 
-from spreadgym.config.materials import MaterialLibrary
-from spreadgym.config.resources import config_dir, read_yaml
-from spreadgym.config.scene import MAX_PITCH_DEG, MAX_RPM, MIN_RPM, Scene
+from spreadgym.config.resources import read_yaml
 from spreadgym.errors import SpreadgymError
-from spreadgym.physics.contacts import resolve_contacts
+from spreadgym.spread.variability import (  # noqa: F401  (the chart's names for the model)
+    FACTORS,
+    OFFSETS,
+    Draw,
+    check_half_range,
+    default_variability,
+    draw_from_unit,
+    draw_library,
+    draw_name,
+    perturbed,
+)
 
-VARIABILITY_FILE = "chart_variability.yaml"
-FACTORS = ("disc_friction", "vane_friction", "restitution", "size_median", "density", "disc_speed")
-OFFSETS = ("vane_pitch_deg",)
 COUNTS = {"draws": (2, 1024), "verify_draws": (2, 1024), "verify_runs_per_draw": (1, 8)}  # integers, ranges
-MAX_FACTOR = 0.5  # a relative half-range: a quantity within +-50 %
-MAX_PITCH_OFFSET_DEG = 10.0
-
-
-def default_variability() -> dict:
-    """The shipped variability model (configs/chart_variability.yaml)."""
-    return dict(read_yaml(config_dir() / VARIABILITY_FILE)["variability"])
 
 
 def check_variability(given: Union[None, str, Path, Mapping[str, Any]]) -> dict:
@@ -69,22 +56,9 @@ def check_variability(given: Union[None, str, Path, Mapping[str, Any]]) -> dict:
             if not (number and 0.5 <= value < 1.0):
                 raise SpreadgymError(f"{where}: {value!r} is out of range; allowed [0.5, 1)")
         else:
-            high = MAX_PITCH_OFFSET_DEG if key in OFFSETS else MAX_FACTOR
-            if not (number and math.isfinite(value) and 0.0 <= value <= high):
-                raise SpreadgymError(f"{where}: {value!r} is out of range; allowed [0, {high:g}]")
-            value = float(value)
+            value = check_half_range(where, key, value)
         merged[key] = value
     return merged
-
-
-@dataclass(frozen=True)
-class Draw:
-    """One perturbed batch: factors on each quantity of FACTORS, a pitch offset (rad), a granule seed."""
-
-    index: int
-    factors: dict
-    pitch_offset_rad: float
-    seed: int
 
 
 def child(seq: np.random.SeedSequence, i: int) -> np.random.SeedSequence:
@@ -100,48 +74,7 @@ def draws(variability: dict, count: int, seq: np.random.SeedSequence) -> list[Dr
     names = FACTORS + OFFSETS
     u = qmc.Sobol(len(names), scramble=True, seed=np.random.default_rng(points_seq)).random(count)
     seeds = seeds_seq.generate_state(count)
-    out = []
-    for k, row in enumerate(2.0 * u - 1.0):
-        factors = {name: float(1.0 + variability[name] * v) for name, v in zip(FACTORS, row)}
-        out.append(Draw(k, factors, math.radians(variability["vane_pitch_deg"] * float(row[-1])), int(seeds[k])))
-    return out
-
-
-def draw_name(fertilizer: str, draw: Draw) -> str:
-    return f"{fertilizer}~{draw.index}"
-
-
-def draw_library(library: MaterialLibrary, fertilizer: str, cell_draws: list[Draw]) -> MaterialLibrary:
-    """`library` plus one copy of `fertilizer` per draw, its particle density scaled."""
-    base = library.fertilizer(fertilizer)
-    extra = {draw_name(fertilizer, d): replace(base, name=draw_name(fertilizer, d),
-                                               particle_density_kg_m3=base.particle_density_kg_m3
-                                               * d.factors["density"]) for d in cell_draws}
-    return MaterialLibrary(fertilizers={**library.fertilizers, **extra}, surfaces=library.surfaces)
-
-
-def perturbed(scene: Scene, settings: dict, draw: Draw, library: MaterialLibrary) -> dict:
-    """Scene overrides of `settings` (the settings space's overrides) under `draw`, its granule seed included."""
-    contacts = resolve_contacts(scene, library)
-    fertilizer = library.fertilizer_of(scene)
-    d50 = scene.granule.diameter_m if scene.granule.diameter_m is not None else fertilizer.size.d50_m
-    f = draw.factors
-    out = dict(settings)
-    out["spinner.rpm"] = min(MAX_RPM, max(MIN_RPM, settings["spinner.rpm"] * f["disc_speed"]))
-    offset = math.degrees(draw.pitch_offset_rad)
-    if "vanes.pitch_deg" in settings:
-        pitch = np.clip(np.asarray(settings["vanes.pitch_deg"], dtype=float) + offset, -MAX_PITCH_DEG, MAX_PITCH_DEG)
-        out["vanes.pitch_deg"] = pitch.tolist()
-    out.update({
-        "fertilizer": draw_name(scene.fertilizer_name, draw),
-        "contact.disc_friction": min(2.0, contacts.disc_friction * f["disc_friction"]),
-        "contact.vane_friction": min(2.0, contacts.vane_friction * f["vane_friction"]),
-        "contact.disc_restitution": min(1.0, contacts.disc_restitution * f["restitution"]),
-        "contact.vane_restitution": min(1.0, contacts.vane_restitution * f["restitution"]),
-        "granule.diameter_m": min(0.02, d50 * f["size_median"]),
-        "sim.seed": draw.seed,
-    })
-    return out
+    return [draw_from_unit(variability, row, k, seeds[k]) for k, row in enumerate(2.0 * u - 1.0)]
 
 
 def quantile(values, q: float) -> float:

@@ -17,7 +17,7 @@ from spreadgym.report import format_table
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
             "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "honesty", "env-noise",
             "chart-quality", "fit", "batch", "validation", "server", "web",
-            "advise")
+            "advise", "rl-benchmark")
 """Every section, in the order `make bench` runs them (`section_runners` gives each its work)."""
 
 
@@ -84,6 +84,7 @@ def section_runners(args: argparse.Namespace, say) -> dict:
         "server": lambda: server_rows(args.repeats),
         "web": lambda: web_bench.web_rows(repeats=max(args.repeats, 5), progress=say),
         "advise": lambda: advise_bench.advise_bench_rows(args.out / "advise", tests=20, progress=say),
+        "rl-benchmark": lambda: rl_benchmark_rows(args.out, say),
     }
 
 
@@ -131,6 +132,14 @@ def server_rows(repeats: int) -> list[dict]:
 
     with tempfile.TemporaryDirectory() as charts:
         return measured(Path(charts), repeats)
+
+
+def rl_benchmark_rows(out: Path, say) -> list[dict]:
+    """The RL benchmark (docs/benchmark.md): trains and scores what runs/benchmark still lacks
+    (hours on two cores; resumable), then the baseline table with every rung's steps/s."""
+    from spreadgym.agents import benchmark
+
+    return benchmark.benchmark_rows(Path("runs/benchmark"), out, progress=say)
 
 
 def reference_rows(references, out: Path, say) -> list[dict]:

@@ -1,35 +1,49 @@
-"""`spreadgym compare`: a trained policy against the published settings, random search,
-grid search, CMA-ES and Optuna's TPE on the evaluation set, with every simulation counted."""
+"""`spreadgym compare`: policies (spreadgym train runs, rl_zoo3 or stable-baselines3 model
+files, `module:function` callables) against the baselines (published settings, the centre
+and a random action, random search, grid search, CMA-ES, Optuna's TPE) on the env's
+evaluation jobs, with every simulation counted; with `--seeds N` each method gets N runs,
+and where the benchmark's reference scores exist the normalised scores are aggregated
+with rliable (interquartile mean, stratified bootstrap intervals, performance profiles)."""
 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from pathlib import Path
 
 from spreadgym.cli import arguments
 
-METHODS = ("published", "random", "grid", "cmaes", "optuna")
+METHODS = ("published", "centre", "random-action", "random", "grid", "cmaes", "optuna")
+DEFAULT_METHODS = ("published", "random", "grid", "cmaes", "optuna")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
-    from spreadgym.envs.common.config import DESIGN, load_env_config
 
-    parser.add_argument("--model", type=Path, action="append", metavar="DIR/model.zip",
-                        help="policy saved by spreadgym train (repeat the flag to compare several)")
+    parser.add_argument("--model", action="append", metavar="[LABEL=]MODEL",
+                        help="a policy: a spreadgym train run (DIR or DIR/model.zip), an rl_zoo3 or "
+                             "stable-baselines3 model file, or module:function (policy(obs) -> action); repeat "
+                             "the flag for several, the same LABEL for the seeds of one method")
+    parser.add_argument("--env", metavar="ID",
+                        help="env (default: the models', else spreadgym/SpinnerDesign-v1); its evaluation jobs "
+                             "are the held-out ones of docs/benchmark.md")
     parser.add_argument("--budget", type=arguments.COUNT, default=DEFAULT_BUDGET, metavar="N",
                         help=f"simulations per job for each search (default {DEFAULT_BUDGET})")
-    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS, metavar="METHOD",
-                        help=f"baselines to run (default: all of {', '.join(METHODS)})")
+    parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS), choices=METHODS, metavar="METHOD",
+                        help=f"baselines to run (default: {', '.join(DEFAULT_METHODS)}; also centre, random-action)")
+    parser.add_argument("--seeds", type=arguments.COUNT, default=1, metavar="N",
+                        help="runs of each baseline, seeds --seed ... --seed + N - 1, each scored on its own "
+                             "samples (default 1)")
     parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
-                        help="scoring episodes per job, each on another granule sample (default 1)")
+                        help="scoring episodes per job and run, each on another granule sample (default 1)")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
-                        help=f"granules per simulation (default: the env's, {load_env_config(DESIGN).granules})")
+                        help="granules per simulation (default: the env's, the scene's sim.granules, 2048 on the "
+                             "paper scene)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
     parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
-                        help="target swaths (default 2 3 4 5)")
+                        help="target swaths (default: the env's evaluation jobs; v0: 2 3 4 5)")
     parser.add_argument("--seed", type=arguments.SEED, default=0, help="seed of the searches (default 0)")
     parser.add_argument("--workers", type=arguments.COUNT, default=1, metavar="N",
                         help="processes for the searches (default 1; wall times are per core either way)")
@@ -55,14 +69,20 @@ def _env(env_id: str, env_kwargs: dict):
     return _ENVS[key]
 
 
-def baseline_job(env_id: str, env_kwargs: dict, ctx, method: str, budget: int, seed: int, episodes: int):
-    """One method on one job (runs in a worker process when --workers > 1)."""
+def baseline_job(env_id: str, env_kwargs: dict, ctx, method: str, budget: int, seed: int, episodes: int,
+                 run: int = 0):
+    """Run `run` of one method on one job (in a worker process when --workers > 1): the
+    search seed `seed + run`, the scoring episodes of that run."""
     import os
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     from spreadgym.agents.baselines import run_baseline
 
-    return run_baseline(_env(env_id, env_kwargs), ctx, method, budget, seed, episodes)
+    rows = run_baseline(_env(env_id, env_kwargs), ctx, method, budget, seed + run, episodes,
+                        first_episode=run * episodes)
+    for row in rows:
+        row.extra["run"] = run
+    return rows
 
 
 def run(args: argparse.Namespace) -> int:
@@ -81,38 +101,48 @@ def run(args: argparse.Namespace) -> int:
     out_folder(args).check()
     if args.workers < 1:
         raise SpreadgymError(f"--workers must be at least 1, got {args.workers}")
+    if args.seeds < 1:
+        raise SpreadgymError(f"--seeds must be at least 1, got {args.seeds}")
     started = time.perf_counter()
     from spreadgym.threads import set_threads, thread_count
 
     per_worker = max(1, (args.threads or thread_count()) // args.workers)  # the two levels never multiply
     set_threads(per_worker)
-    policies = _load_policies(args.model or [])
-    env_id = ev.DESIGN_ENV
+    policies = _load_policies(args.model or [], args.env)
+    env_id = ev.canonical_env_id(args.env or (policies[0][1].env_id if policies else DEFAULT_ENV))
     train_kwargs = policies[0][1].env_kwargs if policies else {}
     env_kwargs = evaluation_env_kwargs(train_kwargs, args.granules)
     env = _env(env_id, env_kwargs)  # checks the kwargs here
+    if "SpinnerDesign" not in env_id:
+        raise SpreadgymError(f"--env {env_id}: compare needs a SpinnerDesign task (the searches set absolute "
+                             "settings)")
     env_kwargs = {**env_kwargs, "granules": env.unwrapped.task.base_scene.sim.granules}  # the count that runs
-    jobs = ev.evaluation_set(args.fertilizers, args.swaths)
+    jobs = ev.evaluation_set(args.fertilizers, args.swaths, env=env)
     from spreadgym.agents.commands.evaluate import _check_jobs
 
     _check_jobs(env, jobs)
     methods = list(dict.fromkeys(args.methods))
     rows: dict[str, list] = {}
     titles = dict(METHOD_TITLES)
-    for name, policy, title in policies:
-        titles[name] = title
-        rows[name] = []
+    runs_seen: dict[str, int] = {}
+    for key, policy, title in policies:
+        titles[key] = title
+        run_index = runs_seen[key] = runs_seen.get(key, -1) + 1
+        rows.setdefault(key, [])
+        _check_fits(policy, env)
         for ctx in tqdm(jobs, desc=title, unit="job", file=sys.stderr, disable=None, leave=False):
-            for episode in range(args.episodes):
-                rows[name].append(ev.run_policy(env, ctx, policy.act, name, episode))
-    tasks = [(m, ctx) for m in methods for ctx in jobs]
+            for episode in range(run_index * args.episodes, (run_index + 1) * args.episodes):
+                row = ev.run_policy(env, ctx, policy.act, key, episode)
+                row.extra["run"] = run_index
+                rows[key].append(row)
+    tasks = [(m, ctx, r) for m in methods for r in range(args.seeds) for ctx in jobs]
     for m in methods:
         rows[m] = []
     bar = tqdm(total=len(tasks), desc="baselines", unit="job", file=sys.stderr, disable=None, leave=False)
     if args.workers == 1:
-        for m, ctx in tasks:
+        for m, ctx, r in tasks:
             bar.set_description(f"{titles[m]}")
-            rows[m].extend(baseline_job(env_id, env_kwargs, ctx, m, args.budget, args.seed, args.episodes))
+            rows[m].extend(baseline_job(env_id, env_kwargs, ctx, m, args.budget, args.seed, args.episodes, r))
             bar.update()
     else:
         import multiprocessing
@@ -121,89 +151,173 @@ def run(args: argparse.Namespace) -> int:
         with ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("forkserver"),
                                  initializer=set_threads, initargs=(per_worker,)) as pool:
             futures = {pool.submit(baseline_job, env_id, env_kwargs, ctx, m, args.budget, args.seed,
-                                   args.episodes): m for m, ctx in tasks}
+                                   args.episodes, r): m for m, ctx, r in tasks}
             for future in as_completed(futures):
                 rows[futures[future]].extend(future.result())
                 bar.update()
     bar.close()
     for m in rows:
-        rows[m].sort(key=lambda r: (r.context["fertilizer"], r.context["target_swath_m"], r.episode))
-    order = [name for name, _, _ in policies] + methods
+        rows[m].sort(key=lambda r: (r.extra.get("run", 0), r.context["fertilizer"], r.context["target_swath_m"],
+                                    r.episode))
+    order = list(dict.fromkeys(key for key, _, _ in policies)) + methods
     summaries = []
     for m in order:
         s = ev.summarise(m, rows[m])
         s["method"] = titles.get(m, m)
         s["key"] = m
+        s["runs"] = 1 + max((r.extra.get("run", 0) for r in rows[m]), default=0)
         summaries.append(s)
     ev.mark_ties(summaries)
+    aggregated = _aggregate(env_id, jobs, rows, order, summaries)
     elapsed = time.perf_counter() - started
     with out_folder(args).writing() as folder:
-        written = write_outputs(folder, summaries, rows, order, titles, args, env_kwargs, elapsed)
-    payload = {"budget": args.budget, "episodes": args.episodes, "env": env_id, "env_kwargs": env_kwargs,
-               "jobs": [c.as_dict() for c in jobs], "table": summaries,
+        written = write_outputs(folder, summaries, rows, order, titles, args, env_kwargs, elapsed, aggregated)
+    payload = {"budget": args.budget, "episodes": args.episodes, "seeds": args.seeds, "env": env_id,
+               "env_kwargs": env_kwargs, "jobs": [c.as_dict() for c in jobs], "table": summaries,
                "rows": [r.as_dict() for m in order for r in rows[m]], "elapsed_s": elapsed,
-               "files": [str(p) for p in written]}
+               "normalised": aggregated["note"], "files": [str(p) for p in written]}
     if args.json:
         print_json(payload)
         return 0
-    print(f"{len(jobs)} jobs, search budget {args.budget} simulations per job, "
-          f"{env_kwargs['granules']} granules per simulation")
+    print(f"{env_id}: {len(jobs)} jobs, search budget {args.budget} simulations per job, "
+          f"{env_kwargs['granules']} granules per simulation, {args.seeds} run(s) per baseline")
     print(ev.text_table(summaries, ev.SUMMARY_COLUMNS))
+    if aggregated["matrices"]:
+        print()
+        print(ev.text_table(summaries, NORMALISED_COLUMNS))
+    print(aggregated["note"])
     print(f"elapsed {elapsed:.0f} s")
     for path in written:
         print(f"wrote {path}")
     return 0
 
 
-def _load_policies(paths) -> list:
-    """(key, SavedPolicy, title) per --model; all SpinnerDesign, all on the same env kwargs."""
+DEFAULT_ENV = "spreadgym/SpinnerDesign-v1"
+NORMALISED_COLUMNS = (
+    ("method", "method"),
+    ("runs", "runs"),
+    ("iqm", "normalised IQM"),
+    ("iqm_low", "95 % CI low"),
+    ("iqm_high", "95 % CI high"),
+    ("mean_normalised", "normalised mean"),
+    ("cv_iqm_percent", "CV IQM (%)"),
+    ("cv_iqm_low", "CV CI low"),
+    ("cv_iqm_high", "CV CI high"),
+)
+
+
+def _aggregate(env_id: str, jobs, rows: dict, order: list, summaries: list) -> dict:
+    """rliable's IQM (stratified bootstrap 95 % interval) of each method's normalised scores
+    (docs/benchmark.md), put into `summaries`, where the benchmark's references cover every job."""
+    from spreadgym.agents import benchmark
+
+    references = benchmark.shipped_references(env_id)
+    labels = [ctx.label for ctx in jobs]
+    if references is None or any(label not in references["jobs"] for label in labels):
+        return {"matrices": {}, "note": f"no normalised scores: the benchmark's references "
+                                         f"({benchmark.REFERENCES_FILE}) lack {env_id} or some of its jobs"}
+    references = {**references, "jobs": {label: references["jobs"][label] for label in labels}}
+    runs = {m: [{"rows": [r.as_dict() for r in rows[m] if r.extra.get("run", 0) == k]}
+                for k in range(1 + max((r.extra.get("run", 0) for r in rows[m]), default=0))] for m in order}
+    matrices = {m: benchmark.score_matrix(found, references) for m, found in runs.items()}
+    stats = benchmark.aggregate(matrices)
+    cv = benchmark.aggregate({m: benchmark.score_matrix(found, references, "cv") for m, found in runs.items()})
+    for s in summaries:
+        m = s["key"]
+        s.update({"iqm": stats[m]["iqm"][0], "iqm_low": stats[m]["iqm"][1], "iqm_high": stats[m]["iqm"][2],
+                  "mean_normalised": stats[m]["mean"][0], "cv_iqm_percent": cv[m]["iqm"][0],
+                  "cv_iqm_low": cv[m]["iqm"][1], "cv_iqm_high": cv[m]["iqm"][2]})
+    return {"matrices": matrices, "note": "normalised: 0 = a random action's mean reward, 1 = the best known "
+                                          "setting (CMA-ES at a generous budget, docs/benchmark.md); "
+                                          "IQM over (run, job) with rliable's stratified bootstrap 95 % interval"}
+
+
+def _check_fits(policy, env) -> None:
+    """A one-line error when the policy does not take the env's observation or give its action."""
+    from spreadgym.errors import SpreadgymError
+
+    obs, _ = env.reset(seed=0)
+    try:
+        action = policy.act(obs)
+        env.unwrapped.task.settings_map.to_settings(_action_of(action, env.action_space.shape))
+    except Exception as exc:  # the policy's own failure, whatever it is, is the message
+        raise SpreadgymError(f"--model {policy.source}: does not fit {env.spec.id if env.spec else 'the env'} "
+                             f"(observation {obs.shape}, action {env.action_space.shape}): "
+                             f"{type(exc).__name__}: {exc}") from None
+
+
+def _action_of(action, shape):
+    import numpy as np
+
+    action = np.asarray(action, dtype=np.float64)
+    if action.shape != shape:
+        raise ValueError(f"action of shape {action.shape}, expected {shape}")
+    return action
+
+
+def _load_policies(specs, env_id) -> list:
+    """(label, Policy, title) per --model; all SpinnerDesign, all on the same env kwargs."""
     from spreadgym.agents import evaluation as ev
-    from spreadgym.agents.training import load_policy
+    from spreadgym.agents.policies import load_any_policy
     from spreadgym.errors import SpreadgymError
 
     out = []
-    for path in paths:
-        policy = load_policy(path)
-        if policy.env_id != ev.DESIGN_ENV:
-            raise SpreadgymError(f"--model {path}: compare needs a {ev.DESIGN_ENV} policy "
+    for spec in specs:
+        labelled = re.match(r"^([\w.-]+)=(.+)$", spec)
+        label, given = (labelled.group(1), labelled.group(2)) if labelled else ("", spec)
+        policy = load_any_policy(given, env_id)
+        if "SpinnerDesign" not in policy.env_id:
+            raise SpreadgymError(f"--model {given}: compare needs a SpinnerDesign policy "
                                  f"(the searches set absolute settings), this one is for {policy.env_id}")
-        out.append(policy)
+        out.append((label, policy))
     if not out:
         return []
-    same = [{k: v for k, v in p.env_kwargs.items() if k != "granules"} for p in out]
-    for path, kwargs in zip(paths[1:], same[1:]):
+    tasks = {ev.canonical_env_id(p.env_id) for _, p in out}
+    if len(tasks) > 1:
+        raise SpreadgymError(f"--model: the policies are for different envs ({', '.join(sorted(tasks))}); "
+                             "compare runs every method on one env")
+    same = [{k: v for k, v in p.env_kwargs.items() if k != "granules"} for _, p in out]
+    for spec, kwargs in zip(specs[1:], same[1:]):
         if kwargs != same[0]:
-            raise SpreadgymError(f"--model {path}: trained on other env kwargs ({kwargs}) than {paths[0]} "
+            raise SpreadgymError(f"--model {spec}: trained on other env kwargs ({kwargs}) than {specs[0]} "
                                  f"({same[0]}); compare runs every method on one env")
-    algos = [p.algo for p in out]
+    names = [label or p.name for label, p in out]
     result = []
-    for policy in out:
-        if algos.count(policy.algo) == 1:
-            key, title = policy.algo, f"{policy.algo.upper()} policy"
+    for (label, policy), name in zip(out, names):
+        if label:
+            key, title = label, label
+        elif policy.kind == "callable":
+            key, title = name, name
+        elif names.count(name) == 1:
+            key, title = name, f"{name.upper()} policy"
         else:
-            run_name = policy.path.parent.name
-            key, title = f"{policy.algo}:{run_name}", f"{policy.algo.upper()} policy ({run_name})"
+            run_name = Path(policy.source).parent.name
+            key, title = f"{name}:{run_name}", f"{name.upper()} policy ({run_name})"
         result.append((key, policy, title))
     return result
 
 
-OUTPUTS = ("compare.csv", "compare_rows.csv", "compare.md", "compare.json", "compare.png")
+OUTPUTS = ("compare.csv", "compare_rows.csv", "compare.md", "compare.json", "compare.png", "profiles.png")
 
 
 def out_folder(args: argparse.Namespace):
     """--out as an output folder (`spreadgym.out_folder`): the policies read are its inputs."""
+    from spreadgym.agents.policies import model_files
     from spreadgym.out_folder import OutFolder, named_files
 
-    return OutFolder(args.out, "compare", OUTPUTS, named_files(*(args.model or [])), args.force,
+    inputs = named_files(*(path for spec in args.model or [] for path in model_files(spec)))
+    return OutFolder(args.out, "compare", OUTPUTS, inputs, args.force,
                      marker="compare.json")
 
 
-def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, elapsed) -> list:
+def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, elapsed, aggregated=None) -> list:
     from spreadgym.agents import evaluation as ev
     from spreadgym.report import print_json
 
     out.mkdir(parents=True, exist_ok=True)
-    written = [ev.write_csv(out / "compare.csv", summaries, ev.SUMMARY_COLUMNS)]
+    normalised = bool(aggregated and aggregated["matrices"])
+    columns = ev.SUMMARY_COLUMNS + (NORMALISED_COLUMNS[1:] if normalised else ())
+    written = [ev.write_csv(out / "compare.csv", summaries, columns)]
     flat = [ev.flat_row(r) | {"method": titles.get(r.method, r.method)} for m in order for r in rows[m]]
     written.append(ev.write_csv(out / "compare_rows.csv", flat, ev.ROW_COLUMNS))
     md = out / "compare.md"
@@ -212,13 +326,20 @@ def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, e
         f"Evaluation set: {len({(r['fertilizer'], r['target_swath_m']) for r in flat})} jobs; "
         f"search budget {args.budget} simulations per job; {granules} granules per simulation; "
         f"{args.episodes} scoring episode(s) per job; elapsed {elapsed:.0f} s.\n\n"
-        + ev.markdown_table(summaries, ev.SUMMARY_COLUMNS) + "\n\nPer job:\n\n"
+        + ev.markdown_table(summaries, ev.SUMMARY_COLUMNS) + "\n\n"
+        + ((ev.markdown_table(summaries, NORMALISED_COLUMNS) + "\n\n") if normalised else "")
+        + (f"{aggregated['note']}\n\n" if aggregated else "") + "Per job:\n\n"
         + ev.markdown_table(flat, ev.ROW_COLUMNS) + "\n", encoding="utf-8")
     written.append(md)
     with open(out / "compare.json", "w", encoding="utf-8") as handle:
         print_json({"table": summaries, "rows": [r.as_dict() for m in order for r in rows[m]]}, handle)
     written.append(out / "compare.json")
     written.append(cv_bars(out / "compare.png", rows, order, titles))
+    if normalised:
+        from spreadgym.agents.benchmark import plot_profiles
+
+        written.append(plot_profiles(aggregated["matrices"], out / "profiles.png",
+                                     {m: titles.get(m, m) for m in order}))
     return written
 
 

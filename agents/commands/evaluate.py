@@ -1,4 +1,5 @@
-"""`spreadgym evaluate`: run a trained policy on the fixed evaluation set."""
+"""`spreadgym evaluate`: run a policy on the env's evaluation jobs: a spreadgym train run, an
+rl_zoo3 or stable-baselines3 model file, or a `module:function` callable."""
 
 from __future__ import annotations
 
@@ -10,22 +11,25 @@ from spreadgym.cli import arguments
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from spreadgym.envs.common.config import DESIGN, load_env_config
 
-    parser.add_argument("--model", type=Path, required=True, metavar="DIR/model.zip",
-                        help="policy saved by spreadgym train")
+    parser.add_argument("--model", required=True, metavar="MODEL",
+                        help="a spreadgym train run (DIR or DIR/model.zip), an rl_zoo3 or stable-baselines3 model "
+                             "file, or module:function (policy(obs) -> action, one observation at a time)")
+    parser.add_argument("--env", metavar="ID",
+                        help="env of a model that names none (a plain SB3 file, a callable; default "
+                             "spreadgym/SpinnerDesign-v1); a train or zoo run's own env otherwise")
     parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
                         help="episodes per job, each on another granule sample (default 1)")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
-                        help=f"granules per simulation (default: the env's, {load_env_config(DESIGN).granules}, "
-                             "whatever training used)")
+                        help="granules per simulation (default: the env's, the scene's sim.granules, 2048 on the "
+                             "paper scene, whatever training used)")
     parser.add_argument("--fertilizers", nargs="+", metavar="NAME", help="restrict the evaluation set")
     parser.add_argument("--swaths", nargs="+", type=arguments.real(0.0, 100.0, low_open=True), metavar="M",
-                        help="target swaths (default 2 3 4 5)")
+                        help="target swaths (default: the env's evaluation jobs; v0: 2 3 4 5)")
     parser.add_argument("--json", action="store_true", help="print the rows as JSON")
     parser.add_argument("--out", type=arguments.output_folder, metavar="DIR2",
-                        help="folder for the table and plots (default: DIR/eval; an evaluation's earlier outputs "
-                             "are replaced)")
+                        help="folder for the table and plots (default: the model's folder/eval, out/eval for a "
+                             "callable; an evaluation's earlier outputs are replaced)")
     arguments.force_flag(parser)
     parser.add_argument("--no-plots", action="store_true", help="skip the pattern plots")
 
@@ -34,22 +38,25 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from spreadgym.agents import evaluation as ev
-    from spreadgym.agents.training import load_policy
+    from spreadgym.agents.commands.compare import _check_fits
+    from spreadgym.agents.policies import describe, load_any_policy, model_files
     from spreadgym.errors import SpreadgymError
     from spreadgym.out_folder import OutFolder, named_files
     from spreadgym.report import print_json
 
     if args.episodes < 1:
         raise SpreadgymError(f"--episodes must be at least 1, got {args.episodes}")
-    policy = load_policy(args.model)
-    out = OutFolder(args.out or policy.path.parent / "eval", "evaluate", OUTPUTS, named_files(args.model), args.force,
-                    marker="eval.json")
+    policy = load_any_policy(args.model, args.env)
+    out = OutFolder(args.out or _default_out(policy.kind, Path(args.model)), "evaluate", OUTPUTS,
+                    named_files(*model_files(args.model)), args.force, marker="eval.json")
     out.check()
     env_kwargs = evaluation_env_kwargs(policy.env_kwargs, args.granules)
-    env = ev.make_env(policy.env_id, env_kwargs)
-    jobs = ev.evaluation_set(args.fertilizers, args.swaths)
+    env_id = ev.canonical_env_id(policy.env_id)
+    env = ev.make_env(env_id, env_kwargs)
+    jobs = ev.evaluation_set(args.fertilizers, args.swaths, env=env)
     _check_jobs(env, jobs)
-    method = f"{policy.algo} policy"
+    _check_fits(policy, env)
+    method = policy.name if policy.kind == "callable" else f"{policy.name} policy"
     rows = []
     with tqdm(total=len(jobs) * args.episodes, desc="evaluate", unit="episode", file=sys.stderr,
               disable=None, leave=False) as bar:
@@ -60,14 +67,14 @@ def run(args: argparse.Namespace) -> int:
     summary = ev.summarise(method, rows)
     with out.writing() as folder:
         written = write_outputs(folder, rows, summary, env, None if args.no_plots else method)
-    payload = {"model": str(args.model), "env": policy.env_id, "env_kwargs": env_kwargs,
+    payload = {"model": str(args.model), "kind": policy.kind, "env": env_id, "env_kwargs": env_kwargs,
                "rows": [_json_row(r) for r in rows], "summary": summary,
                "files": [str(p) for p in written]}
     if args.json:
         print_json(payload)
         return 0
     flat = [ev.flat_row(r) for r in rows]
-    print(f"{method} from {args.model} on {len(jobs)} jobs ({policy.env_id}, "
+    print(f"{method} ({describe(policy)}) from {args.model} on {len(jobs)} jobs ({env_id}, "
           f"{env_kwargs.get('granules', 'default')} granules)")
     print(ev.text_table(flat, ev.ROW_COLUMNS))
     print()
@@ -75,6 +82,13 @@ def run(args: argparse.Namespace) -> int:
     for path in written:
         print(f"wrote {path}")
     return 0
+
+
+def _default_out(kind: str, model: Path) -> Path:
+    """DIR/eval beside the model (out/eval for a callable)."""
+    if kind == "callable":
+        return Path("out/eval")
+    return (model if model.is_dir() else model.parent) / "eval"
 
 
 def evaluation_env_kwargs(train_kwargs: dict, granules) -> dict:
@@ -88,6 +102,8 @@ def evaluation_env_kwargs(train_kwargs: dict, granules) -> dict:
 def _check_jobs(env, jobs) -> None:
     from spreadgym.errors import SpreadgymError
 
+    if env.unwrapped.task.evaluation_jobs:  # the env's own held-out jobs (v1)
+        return
     known = env.unwrapped.task.cfg.context.fertilizers
     for ctx in jobs:
         if ctx.fertilizer not in known:

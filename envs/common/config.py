@@ -57,6 +57,18 @@ class ContextConfig(StrictModel):
     forward_speed_m_s: tuple[Real, Real] = (0.0, 0.0)
     wind_x_m_s: tuple[Real, Real] = (0.0, 0.0)
     wind_y_m_s: tuple[Real, Real] = (0.0, 0.0)
+    swath_draw: Literal["tray_grid", "continuous"] = Field(
+        default="tray_grid",
+        description="tray_grid: the target is a whole number of trays of pattern.tray_width_m (v0); continuous: "
+                    "uniform in the range, each job's trays W / round(W / tray_width_m) wide")
+    held_out_swath_m: list[tuple[Real, Real]] = Field(
+        default_factory=list, max_length=16,
+        description="bands of target swath never drawn in training (the evaluation's); continuous draws only")
+    encoding: Literal["one_hot", "properties"] = Field(
+        default="one_hot",
+        description="one_hot: fertilizer and spinner material one-hot, then every property and job entry (v0); "
+                    "properties: the material properties and only the job entries whose range is not one value, "
+                    "so an unseen fertilizer is observed by what it is")
 
     @field_validator("fertilizers", "spinner_materials")
     @classmethod
@@ -80,6 +92,47 @@ class ContextConfig(StrictModel):
     @classmethod
     def _wind(cls, v):
         return _check_range(v, -30.0, 30.0, "m/s")
+
+    @field_validator("held_out_swath_m")
+    @classmethod
+    def _bands(cls, v):
+        return [_check_range(band, 0.0, 100.0, "m") for band in v]
+
+    @model_validator(mode="after")
+    def _bands_need_continuous(self) -> "ContextConfig":
+        if self.held_out_swath_m and self.swath_draw != "continuous":
+            raise ValueError("held_out_swath_m needs swath_draw: continuous (bands of a tray grid would be "
+                             "a few tray counts; list them as evaluation jobs instead)")
+        lo, hi = self.target_swath_m
+        covered = sum(max(0.0, min(b, hi) - max(a, lo)) for a, b in _merged(self.held_out_swath_m))
+        if self.held_out_swath_m and covered >= hi - lo:
+            raise ValueError(f"held_out_swath_m leaves nothing of target_swath_m [{lo}, {hi}] to train on")
+        return self
+
+
+def _merged(bands) -> list[tuple[float, float]]:
+    """Bands sorted and merged where they overlap."""
+    out: list[tuple[float, float]] = []
+    for a, b in sorted(bands):
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out
+
+
+class EvaluationConfig(StrictModel):
+    """The evaluation jobs: every combination of these lists (`spreadgym evaluate` and
+    `compare` score them; `split: eval` draws among them). With `held_out`, each job must lie
+    outside the training contexts (an unseen fertilizer or material, a held-out swath band,
+    or a speed or wind outside the training ranges): checked when the env is built."""
+
+    fertilizers: list[str] = Field(min_length=1, max_length=64)
+    spinner_materials: list[str] = Field(min_length=1, max_length=64)
+    target_swath_m: list[Real] = Field(min_length=1, max_length=64)
+    forward_speed_m_s: list[Real] = Field(default=[0.0], min_length=1, max_length=16)
+    wind_m_s: list[tuple[Real, Real]] = Field(default=[(0.0, 0.0)], min_length=1, max_length=16)
+    held_out: bool = Field(default=True, description="every job lies outside the training contexts (checked)")
 
 
 class SettingsConfig(StrictModel):
@@ -184,9 +237,39 @@ class DesignConfig(StrictModel):
     confidence_interval: bool = Field(default=False, description="the CV's 95 % t interval in info[\"metrics\"]")
     fallback_restitution: FallbackRestitution = FallbackRestitution()
     context: ContextConfig
+    evaluation: Optional[EvaluationConfig] = Field(
+        default=None, description="the evaluation jobs (null: the v0 set of spreadgym evaluate)")
+    split: Literal["train", "eval"] = Field(
+        default="train", description="train: reset draws training contexts; eval: it draws among the evaluation jobs")
+    variability: Optional[dict[str, Real]] = Field(
+        default=None,
+        description="null: the material properties are exact; a mapping (half-ranges of "
+                    "configs/chart_variability.yaml, {} for its values): each episode draws a hidden batch from "
+                    "that model, and the observation shows the nominal properties only")
     settings: SettingsConfig = SettingsConfig()
     reward: RewardConfig = RewardConfig()
     render: RenderConfig = RenderConfig()
+
+    @field_validator("variability")
+    @classmethod
+    def _variability(cls, v):
+        if v is None:
+            return None
+        from spreadgym.spread.variability import FACTORS, OFFSETS, check_half_range, default_variability
+
+        known = FACTORS + OFFSETS
+        merged = {key: float(value) for key, value in default_variability().items() if key in known}
+        for key, value in v.items():
+            if key not in known:
+                raise ValueError(f"{key}: unknown key; known: {', '.join(known)}")
+            merged[key] = check_half_range(key, key, value)
+        return merged
+
+    @model_validator(mode="after")
+    def _split_needs_jobs(self) -> "DesignConfig":
+        if self.split == "eval" and self.evaluation is None:
+            raise ValueError("split: eval needs an evaluation section (the jobs to draw among)")
+        return self
 
     @model_validator(mode="after")
     def _overrides_not_replaced(self) -> "DesignConfig":
@@ -209,7 +292,18 @@ class TuningConfig(DesignConfig):
     initial_settings: Literal["random", "middle", "scene"] = Field(
         default="random", description="settings of the first tray test of an episode"
     )
+    start: Literal["any", "unsolved"] = Field(
+        default="any",
+        description="any: the first tray test is whatever the initial settings give (v0); unsolved: random initial "
+                    "settings are redrawn until the first tray test misses the goal (at most start_draws draws)")
+    start_draws: Integer = Field(default=16, ge=1, le=1000, description="draws of the unsolved start rule")
     observation: ObservationConfig = ObservationConfig()
+
+    @model_validator(mode="after")
+    def _start_needs_random(self) -> "TuningConfig":
+        if self.start == "unsolved" and self.initial_settings != "random":
+            raise ValueError("start: unsolved redraws the initial settings; it needs initial_settings: random")
+        return self
 
 
 SCHEMAS: dict[str, type[DesignConfig]] = {DESIGN: DesignConfig, TUNING: TuningConfig}
@@ -225,6 +319,36 @@ def _sections(schema: type[BaseModel]) -> set[str]:
     return out
 
 
+MAX_EXTENDS = 8  # depth of `extends` chains
+
+
+def read_env_yaml(source: str) -> dict:
+    """The mapping of an env YAML (a shipped name or a path). A file may start from another
+    with `extends: NAME`: its keys then go over that file's, sections merged key by key
+    (as `gym.make` kwargs are), anything else replaced."""
+    chain: list[dict] = []
+    while source is not None:
+        raw = read_yaml(resolve_named("envs", source))
+        if not isinstance(raw, dict):
+            raise ConfigError("config", f"{brief(source)} does not hold a mapping")
+        chain.append(raw)
+        source = raw.get("extends")
+        if source is not None and not isinstance(source, str):
+            raise ConfigError("extends", f"expected a config name or YAML path, got {brief(source)}")
+        if len(chain) > MAX_EXTENDS:
+            raise ConfigError("extends", f"more than {MAX_EXTENDS} files in the chain (a loop?)")
+    merged: dict = {}
+    for raw in reversed(chain):
+        for key, value in raw.items():
+            if key == "extends":
+                continue
+            if isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+                merged[key] = {**merged[key], **value}
+            else:
+                merged[key] = value
+    return merged
+
+
 def load_env_config(name: str, overrides: Optional[Mapping[str, Any]] = None) -> DesignConfig:
     """Validated config of env `name` (`spinner_design` or `spreader_tuning`) with overrides."""
     if name not in SCHEMAS:
@@ -234,9 +358,7 @@ def load_env_config(name: str, overrides: Optional[Mapping[str, Any]] = None) ->
     source = overrides.pop("config", name)
     if not isinstance(source, str):
         raise ConfigError("config", f"expected a config name or YAML path, got {brief(source)}")
-    raw = read_yaml(resolve_named("envs", source))
-    if not isinstance(raw, dict):
-        raise ConfigError("config", f"{brief(source)} does not hold a mapping")
+    raw = read_env_yaml(source)
     # Validate the file alone first, so its own errors are reported as such, then work
     # on the full dump (defaults included) so any key can be overridden.
     tree = validate(schema, dict(raw), "config").model_dump(mode="python")

@@ -1,21 +1,25 @@
 """What both environments share: the base scene, the job (context) drawn per episode and
-its encoding, one simulated tray test, reset options and infos.
+its encoding, the evaluation jobs, the hidden batch of the robust variant, one simulated
+tray test, reset options and infos.
 
 Determinism: `Task.sample_context` draws, in this order, the fertilizer, the spinner
-material, the target swath (as a number of trays), the forward speed and the wind
-(x, y) from the env's `np_random`.
+material, the target swath (a number of trays, or one uniform over the training widths
+with `swath_draw: continuous`), the forward speed and the wind (x, y) from the env's
+`np_random`; with `split: eval` it draws one job index instead. `Task.sample_batch`
+(the robust variant only) then draws the batch's factors, one uniform each.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any
+import zlib
+from dataclasses import dataclass, replace
+from typing import Any, Optional
 
 import numpy as np
 
 from spreadgym.config.base import brief
-from spreadgym.config.materials import load_library
+from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import MIN_BOUT_TRAYS, Scene, load_scene, scene_with
 from spreadgym.envs.common.actions import Settings, SettingsMap
 from spreadgym.envs.common.config import DesignConfig
@@ -25,6 +29,7 @@ from spreadgym.physics.selection import choose_model
 from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.pipeline import SimulationResult, run_scene
 from spreadgym.spread.precision import simulate_precisely
+from spreadgym.spread.variability import FACTORS, OFFSETS, Draw, draw_from_unit, draw_library, perturbed
 
 SEED_BOUND = 2**31 - 1
 
@@ -57,6 +62,50 @@ class Context:
 
 
 CONTEXT_KEYS = tuple(Context.__dataclass_fields__)
+PROPERTY_NAMES = ["d50", "size_sd", "particle_density", "disc_friction", "vane_friction", "disc_restitution",
+                  "vane_restitution"]
+JOB_NAMES = ["target_swath", "forward_speed", "wind_x", "wind_y"]
+
+
+def job_tray_width_m(target_swath_m: float, tray_width_m: float) -> float:
+    """The tray width of a continuous-swath job: the target in a whole number of trays as
+    near `tray_width_m` as can be (at least MIN_BOUT_TRAYS trays), as a tester lays trays
+    for the working width under test."""
+    trays = max(MIN_BOUT_TRAYS, int(round(target_swath_m / tray_width_m)))
+    return target_swath_m / trays
+
+
+@dataclass(frozen=True)
+class Batch:
+    """The hidden batch of one episode (robust variant): a variability draw and the
+    library holding its fertilizer copy (particle density scaled), named after the draw
+    (`<fertilizer>~<crc32 of the draw>`), so that the copies of many episodes can share
+    one library (`batches_library`) and their tray tests run as one batch."""
+
+    draw: Draw
+    library: MaterialLibrary
+
+    def as_dict(self) -> dict:
+        out = {name: float(self.draw.factors[name]) for name in FACTORS}
+        out[OFFSETS[0]] = float(math.degrees(self.draw.pitch_offset_rad))
+        return out
+
+
+def batches_library(library: MaterialLibrary, batches: list) -> Optional[MaterialLibrary]:
+    """`library` with the fertilizer copies of every hidden batch in `batches` (None where an
+    episode has none), or None when two different copies share a name (then each episode
+    runs with its own library)."""
+    extra: dict = {}
+    for batch in batches:
+        if batch is None:
+            continue
+        for name, fertilizer in batch.library.fertilizers.items():
+            if name in library.fertilizers:
+                continue
+            if name in extra and extra[name] != fertilizer:
+                return None
+            extra[name] = fertilizer
+    return replace(library, fertilizers={**library.fertilizers, **extra})
 
 
 def to_unit(value: float, lo: float, hi: float) -> float:
@@ -84,34 +133,45 @@ class Task:
             self.base_scene = base if cfg.granules is None else scene_with(base, {"sim.granules": cfg.granules})
         except ConfigError as exc:  # the bound on a run's work: `granules` is the env's key for it
             raise ConfigError("granules" if exc.key == "sim.granules" else exc.key, exc.message) from None
-        ctx = cfg.context
-        for name in ctx.fertilizers:
+        ctx, ev = cfg.context, cfg.evaluation
+        self.fertilizers = list(dict.fromkeys([*ctx.fertilizers, *(ev.fertilizers if ev else [])]))
+        self.spinner_materials = list(dict.fromkeys([*ctx.spinner_materials, *(ev.spinner_materials if ev else [])]))
+        for name in self.fertilizers:
             try:
                 self.library.fertilizer(name)
             except MaterialError as exc:
-                raise ConfigError("context.fertilizers", str(exc)) from None
-        for name in ctx.spinner_materials:
+                where = "context.fertilizers" if name in ctx.fertilizers else "evaluation.fertilizers"
+                raise ConfigError(where, str(exc)) from None
+        for name in self.spinner_materials:
             try:
                 self.library.check_surface(name)
             except MaterialError as exc:
-                raise ConfigError("context.spinner_materials", str(exc)) from None
+                where = "context.spinner_materials" if name in ctx.spinner_materials else "evaluation.spinner_materials"
+                raise ConfigError(where, str(exc)) from None
         self.tray_width_m = self.base_scene.pattern.tray_width_m
         lo, hi = ctx.target_swath_m
+        self.continuous = ctx.swath_draw == "continuous"
         self.tray_counts = (
             max(MIN_BOUT_TRAYS, math.ceil(lo / self.tray_width_m - 1e-9)),
             math.floor(hi / self.tray_width_m + 1e-9),
         )
-        if self.tray_counts[0] > self.tray_counts[1]:
+        if self.continuous:
+            self.training_swaths_m = _free_segments((lo, hi), ctx.held_out_swath_m)
+            if lo < MIN_BOUT_TRAYS * self.tray_width_m * 0.5:
+                raise ConfigError("context.target_swath_m", f"[{lo}, {hi}] m: the narrowest job must be at least "
+                                  f"{MIN_BOUT_TRAYS} trays of about {self.tray_width_m} m")
+        elif self.tray_counts[0] > self.tray_counts[1]:
             raise ConfigError(
                 "context.target_swath_m",
                 f"[{lo}, {hi}] m holds no multiple of the tray width {self.tray_width_m} m of at least "
                 f"{MIN_BOUT_TRAYS} trays",
             )
         self.settings_map = SettingsMap(self.base_scene, cfg.settings)
+        first_width = lo if self.continuous else self.tray_counts[0] * self.tray_width_m
         # Every fertilizer/material pair must resolve and the model must accept the scene.
-        for fertilizer in ctx.fertilizers:
-            for material in ctx.spinner_materials:
-                probe = Context(fertilizer, material, self.tray_counts[0] * self.tray_width_m,
+        for fertilizer in self.fertilizers:
+            for material in self.spinner_materials:
+                probe = Context(fertilizer, material, first_width,
                                 ctx.forward_speed_m_s[0], (ctx.wind_x_m_s[0], ctx.wind_y_m_s[0]))
                 scene = self.context_scene(probe)
                 try:
@@ -122,23 +182,71 @@ class Task:
         for end in (-1.0, 1.0):
             settings = self.settings_map.to_settings(np.full(self.settings_map.size, end))
             scene_with(self.base_scene, self.settings_map.scene_overrides(settings))
-        self.context_names = (
-            [f"fertilizer={f}" for f in ctx.fertilizers]
-            + [f"spinner_material={m}" for m in ctx.spinner_materials]
-            + ["d50", "size_sd", "particle_density", "disc_friction", "vane_friction", "disc_restitution",
-               "vane_restitution", "target_swath", "forward_speed", "wind_x", "wind_y"]
-        )
+        if ctx.encoding == "one_hot":
+            self.job_entries = list(JOB_NAMES)
+            self.context_names = ([f"fertilizer={f}" for f in ctx.fertilizers]
+                                  + [f"spinner_material={m}" for m in ctx.spinner_materials]
+                                  + PROPERTY_NAMES + self.job_entries)
+        else:  # what a fertilizer is, not which: an unseen one is observed by its properties
+            ranges = [ctx.target_swath_m, ctx.forward_speed_m_s, ctx.wind_x_m_s, ctx.wind_y_m_s]
+            self.job_entries = [name for name, (a, b) in zip(JOB_NAMES, ranges) if b > a]
+            self.context_names = PROPERTY_NAMES + self.job_entries
         self.context_size = len(self.context_names)
+        self.evaluation_jobs = self._evaluation_jobs()
 
     # -- context ---------------------------------------------------------------------
     def sample_context(self, rng: np.random.Generator) -> Context:
+        if self.cfg.split == "eval":
+            return self.evaluation_jobs[int(rng.integers(len(self.evaluation_jobs)))]
         ctx = self.cfg.context
         fertilizer = ctx.fertilizers[int(rng.integers(len(ctx.fertilizers)))]
         material = ctx.spinner_materials[int(rng.integers(len(ctx.spinner_materials)))]
-        trays = int(rng.integers(self.tray_counts[0], self.tray_counts[1] + 1))
+        if self.continuous:
+            swath = _point_in(self.training_swaths_m, float(rng.uniform()))
+        else:
+            swath = int(rng.integers(self.tray_counts[0], self.tray_counts[1] + 1)) * self.tray_width_m
         speed = float(rng.uniform(*ctx.forward_speed_m_s))
         wind = (float(rng.uniform(*ctx.wind_x_m_s)), float(rng.uniform(*ctx.wind_y_m_s)))
-        return Context(fertilizer, material, trays * self.tray_width_m, speed, wind)
+        return Context(fertilizer, material, swath, speed, wind)
+
+    def is_training_context(self, context: Context) -> bool:
+        """Whether training (`split: train`) can draw `context`."""
+        ctx = self.cfg.context
+        swath = context.target_swath_m
+        if self.continuous:
+            on_swath = any(a <= swath <= b for a, b in self.training_swaths_m)
+        else:
+            trays = swath / self.tray_width_m
+            on_swath = abs(trays - round(trays)) < 1e-9 and self.tray_counts[0] <= round(trays) <= self.tray_counts[1]
+        return (context.fertilizer in ctx.fertilizers and context.spinner_material in ctx.spinner_materials
+                and on_swath and _within(context.forward_speed_m_s, ctx.forward_speed_m_s)
+                and _within(context.wind_m_s[0], ctx.wind_x_m_s) and _within(context.wind_m_s[1], ctx.wind_y_m_s))
+
+    def _evaluation_jobs(self) -> list[Context]:
+        """The evaluation section's jobs (fertilizer-major order), each checked held out where it says so."""
+        ev = self.cfg.evaluation
+        if ev is None:
+            return []
+        jobs = [Context(f, m, float(w), float(v), (float(wind[0]), float(wind[1])))
+                for f in ev.fertilizers for w in ev.target_swath_m for m in ev.spinner_materials
+                for v in ev.forward_speed_m_s for wind in ev.wind_m_s]
+        for job in jobs:
+            self.context_scene(job)  # on the tray grid, speeds and wind in range
+            if ev.held_out and self.is_training_context(job):
+                raise ConfigError("evaluation", f"the job {job.as_dict()} is also a training context; evaluation "
+                                  "jobs must be held out (an unseen fertilizer or material, a width in "
+                                  "context.held_out_swath_m, or a speed or wind outside the training ranges)")
+        return jobs
+
+    def sample_batch(self, context: Context, rng: np.random.Generator) -> Optional[Batch]:
+        """The hidden batch of an episode (robust variant: one uniform per quantity of the
+        variability model, in its order), or None where the properties are exact."""
+        variability = self.cfg.variability
+        if variability is None:
+            return None
+        unit = rng.uniform(-1.0, 1.0, len(FACTORS) + len(OFFSETS))
+        draw = draw_from_unit(variability, unit, zlib.crc32(unit.tobytes()), 0)
+        return Batch(draw, draw_library(self.library, context.fertilizer, [draw]))
 
     def replace_context(self, context: Context, given: Any) -> Context:
         """`context` with the fields of reset's `options["context"]` put in (checked)."""
@@ -149,11 +257,10 @@ class Task:
             if key not in CONTEXT_KEYS:
                 raise ConfigError(f"options.context.{key}", f"unknown key; known: {', '.join(CONTEXT_KEYS)}")
             values[key] = value
-        ctx = self.cfg.context
-        if values["fertilizer"] not in ctx.fertilizers:
-            raise ConfigError("options.context.fertilizer", f"must be one of {ctx.fertilizers}")
-        if values["spinner_material"] not in ctx.spinner_materials:
-            raise ConfigError("options.context.spinner_material", f"must be one of {ctx.spinner_materials}")
+        if values["fertilizer"] not in self.fertilizers:
+            raise ConfigError("options.context.fertilizer", f"must be one of {self.fertilizers}")
+        if values["spinner_material"] not in self.spinner_materials:
+            raise ConfigError("options.context.spinner_material", f"must be one of {self.spinner_materials}")
         wind = values["wind_m_s"]
         if not (isinstance(wind, (list, tuple)) and len(wind) == 2):
             raise ConfigError("options.context.wind_m_s", f"expected [x, y], got {brief(wind)}")
@@ -185,6 +292,8 @@ class Task:
             "flight.forward_speed_m_s": context.forward_speed_m_s,
             "flight.wind_m_s": list(context.wind_m_s),
         }
+        if self.continuous:
+            overrides["pattern.tray_width_m"] = job_tray_width_m(context.target_swath_m, self.tray_width_m)
         scene = scene_with(self.base_scene, overrides)
         extra = self.fallbacks(scene)
         return (scene_with(scene, extra) if extra else scene), extra
@@ -210,8 +319,10 @@ class Task:
         contacts = resolve_contacts(scene, self.library)
         d50 = scene.granule.diameter_m if scene.granule.diameter_m is not None else fert.size.d50_m
         sd = scene.granule.diameter_sd_m if scene.granule.diameter_sd_m is not None else fert.size.sd_m
-        values = [1.0 if f == context.fertilizer else 0.0 for f in ctx.fertilizers]
-        values += [1.0 if m == context.spinner_material else 0.0 for m in ctx.spinner_materials]
+        values = []
+        if ctx.encoding == "one_hot":
+            values += [1.0 if f == context.fertilizer else 0.0 for f in ctx.fertilizers]
+            values += [1.0 if m == context.spinner_material else 0.0 for m in ctx.spinner_materials]
         values += [
             to_unit(d50, *D50_RANGE_M),
             to_unit(sd, *SIZE_SD_RANGE_M),
@@ -220,11 +331,12 @@ class Task:
             to_unit(contacts.vane_friction, *FRICTION_RANGE),
             to_unit(contacts.disc_restitution, *RESTITUTION_RANGE),
             to_unit(contacts.vane_restitution, *RESTITUTION_RANGE),
-            to_unit(context.target_swath_m, *ctx.target_swath_m),
-            to_unit(context.forward_speed_m_s, *ctx.forward_speed_m_s),
-            to_unit(context.wind_m_s[0], *ctx.wind_x_m_s),
-            to_unit(context.wind_m_s[1], *ctx.wind_y_m_s),
         ]
+        job = {"target_swath": to_unit(context.target_swath_m, *ctx.target_swath_m),
+               "forward_speed": to_unit(context.forward_speed_m_s, *ctx.forward_speed_m_s),
+               "wind_x": to_unit(context.wind_m_s[0], *ctx.wind_x_m_s),
+               "wind_y": to_unit(context.wind_m_s[1], *ctx.wind_y_m_s)}
+        values += [job[name] for name in self.job_entries]
         return np.asarray(values, dtype=np.float32)
 
     def context_info(self, context: Context) -> dict:
@@ -234,18 +346,56 @@ class Task:
         return info
 
     # -- simulation ------------------------------------------------------------------
-    def settings_scene(self, context_scene: Scene, settings: Settings, seed: int) -> Scene:
-        return scene_with(context_scene, {**self.settings_map.scene_overrides(settings), "sim.seed": int(seed)})
+    def settings_scene(self, context_scene: Scene, settings: Settings, seed: int,
+                       batch: Optional[Batch] = None) -> Scene:
+        """The job's scene at `settings` with granule seed `seed`; under a hidden `batch`, its
+        perturbed properties and the machine's offsets (the variability model's)."""
+        overrides = self.settings_map.scene_overrides(settings)
+        if batch is not None:
+            overrides = perturbed(context_scene, overrides, batch.draw, batch.library)
+        return scene_with(context_scene, {**overrides, "sim.seed": int(seed)})
 
-    def run(self, scene: Scene, rendering: bool = False) -> SimulationResult:
+    def run(self, scene: Scene, rendering: bool = False, batch: Optional[Batch] = None) -> SimulationResult:
         """One tray test (one run; with the `precision` option, runs pooled to that standard
-        error); with `rendering`, a few paths over the disc are kept for the picture."""
+        error); with `rendering`, a few paths over the disc are kept for the picture; under
+        a hidden `batch`, with its library (the perturbed density)."""
         tracks = self.cfg.render.disc_tracks if rendering else 0
+        library = self.library if batch is None else batch.library
         if self.cfg.precision is not None:
-            return simulate_precisely(scene, self.cfg.precision, model=self.cfg.model, library=self.library,
+            return simulate_precisely(scene, self.cfg.precision, model=self.cfg.model, library=library,
                                       tracks=tracks).as_result()
-        return run_scene(scene, model=self.cfg.model, library=self.library, ci=self.cfg.confidence_interval,
+        return run_scene(scene, model=self.cfg.model, library=library, ci=self.cfg.confidence_interval,
                          tracks=tracks)
+
+
+def _free_segments(span: tuple[float, float], bands) -> list[tuple[float, float]]:
+    """`span` less the `bands` (each clipped to it), as sorted closed segments of positive length."""
+    lo, hi = span
+    out, at = [], lo
+    for a, b in sorted(bands):
+        if a > at:
+            out.append((at, min(a, hi)))
+        at = max(at, b)
+        if at >= hi:
+            break
+    if at < hi:
+        out.append((at, hi))
+    return [(a, b) for a, b in out if b > a]
+
+
+def _point_in(segments: list[tuple[float, float]], u: float) -> float:
+    """The point at fraction `u` of the segments' total length, walking them in order."""
+    total = sum(b - a for a, b in segments)
+    left = u * total
+    for a, b in segments:
+        if left <= b - a:
+            return a + left
+        left -= b - a
+    return segments[-1][1]
+
+
+def _within(value: float, span) -> bool:
+    return span[0] <= value <= span[1]
 
 
 def _real(key: str, value: Any) -> float:

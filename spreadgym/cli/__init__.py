@@ -23,9 +23,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("spreadgym.agents.commands.train",
               "train a PPO or SAC policy on a spreadgym env (resumes from DIR's checkpoints)"),
     "evaluate": ("spreadgym.agents.commands.evaluate",
-                 "run a trained policy (deterministic) on the evaluation set: table, JSON and pattern plots"),
+                 "run a policy (deterministic) on the evaluation jobs: table, JSON and pattern plots"),
     "compare": ("spreadgym.agents.commands.compare",
-                "compare a policy with random search, grid search, CMA-ES and Optuna TPE on the evaluation set"),
+                "compare policies with the baselines on the env's evaluation jobs (--seeds: normalised IQM, rliable)"),
     "demo": ("spreadgym.agents.commands.demo",
              "the main job: better spinner settings for a wider swath (CMA-ES on the fast model, "
              "before/after with the full model), table and pictures"),

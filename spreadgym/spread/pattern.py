@@ -183,7 +183,9 @@ def bout_tray_counts(widths_m, tray_width_m: float) -> np.ndarray:
     with np.errstate(invalid="ignore", over="ignore"):
         ratio = widths / w
         n = np.where(np.isfinite(ratio), np.rint(ratio), 0.0)
-        bad = (n < 1) | ~(np.abs(ratio - n) <= _GRID_TOL * np.maximum(1.0, ratio))
+        # in metres: the CV curve's widths are rounded to the nanometre (`default_widths_m`), which
+        # for a tray width with more decimals moves the ratio by more than _GRID_TOL
+        bad = (n < 1) | ~(np.abs(widths - n * w) <= _GRID_TOL * np.maximum(1.0, widths))
     if bad.any():
         raise ConfigError("pattern.target_swath_m", f"bout width {float(widths[np.argmax(bad)])!r} m is not a "
                                                     f"positive multiple of the tray width {w} m")

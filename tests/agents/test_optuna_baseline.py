@@ -103,7 +103,7 @@ def test_accounting_equals_the_other_searches(budget, monkeypatch):
 def test_compare_runs_optuna_beside_the_other_searches(capsys, tmp_path):
     budget = 6
     code = main(["compare", "--budget", str(budget), "--granules", str(GRANULES), "--fertilizers", "pellet",
-                 "--swaths", "3", "--methods", "cmaes", "optuna", "--json", "--out", str(tmp_path)])
+                 "--swaths", "2.9", "--methods", "cmaes", "optuna", "--json", "--out", str(tmp_path)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     table = {row["key"]: row for row in json.loads(captured.out)["table"]}

@@ -125,11 +125,11 @@ def test_docs_list_the_accepted_range_of_every_key_as_the_schemas_say():
     assert "| `flight.wind_m_s` |" in doc.read_text() and "each >= -20, <= 20" in doc.read_text()
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", [*IDS, "spreadgym/SpinnerDesign-v1", "spreadgym/SpreaderTuning-v1"])
 def test_a_first_reset_that_fails_leaves_a_default_made_env_usable(env_id):
     """The issue's sequence as a user meets it: `gym.make` with its defaults, a first reset
-    refused, then a good reset and a step (gymnasium's passive checker broke it: it is off
-    by default in the registry, envs/registration.py)."""
+    refused, then a good reset and a step (gymnasium 1.4's passive checker broke it; v0 keeps
+    it off, the v1 ids have it on with the case fixed, envs/conventions.py)."""
     env = gym.make(env_id, granules=64)
     with pytest.raises(ConfigError, match="options.context.fertilizer"):
         env.reset(seed=1, options={"context": {"fertilizer": "nope"}})

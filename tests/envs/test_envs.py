@@ -28,6 +28,8 @@ from spreadgym.spread.pattern import Trays
 DESIGN_ID = "spreadgym/SpinnerDesign-v0"
 TUNING_ID = "spreadgym/SpreaderTuning-v0"
 IDS = [DESIGN_ID, TUNING_ID]
+V1_IDS = ["spreadgym/SpinnerDesign-v1", "spreadgym/SpreaderTuning-v1", "spreadgym/SpinnerDesignRobust-v1",
+          "spreadgym/SpinnerDesignTwin-v1"]
 
 
 def _model() -> str:
@@ -51,25 +53,30 @@ def same(a, b) -> bool:
 # -- API checkers ------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("env_id", IDS)
+def _errors_but_v0_deprecation() -> None:
+    warnings.simplefilter("error")
+    warnings.filterwarnings("ignore", message=".*-v0 is deprecated", category=DeprecationWarning)
+
+
+@pytest.mark.parametrize("env_id", IDS + V1_IDS)
 def test_gymnasium_checker_without_warnings(env_id):
     env = make(env_id)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        _errors_but_v0_deprecation()
         gym_check_env(env.unwrapped)
     env.close()
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", IDS + V1_IDS)
 def test_sb3_checker_without_warnings(env_id):
     env = make(env_id)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        _errors_but_v0_deprecation()
         sb3_check_env(env.unwrapped, warn=True)
     env.close()
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", IDS + V1_IDS)
 def test_spaces_and_types(env_id):
     env = make(env_id)
     space = env.action_space
@@ -87,7 +94,7 @@ def test_spaces_and_types(env_id):
 # -- determinism -------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", IDS + V1_IDS)
 def test_same_seed_same_trajectory_bit_for_bit(env_id):
     actions = np.random.default_rng(0).uniform(-1, 1, size=(3, make(env_id).action_space.shape[0]))
     runs = []

@@ -193,11 +193,12 @@ def test_settings_to_action_names_a_bad_value():
 @pytest.mark.parametrize("algo", ["ppo", "sac", "tqc"])
 def test_zoo_hyperparameter_files_have_both_envs(algo):
     data = yaml.safe_load(hyperparams_path(algo).read_text())
-    for name in NAMES:
-        for form in ("spreadgym:{}", "spreadgym/{}"):
-            entry = data[form.format(name)]
-            assert {"n_timesteps", "policy"} <= set(entry)
-            assert not {"env", "seed", "checkpoint_freq", "max_minutes"} & set(entry)  # zoo's own arguments
+    keys = [form.format(name) for name in NAMES for form in ("spreadgym:{}", "spreadgym/{}")]
+    keys += ["spreadgym/SpinnerDesign-v1", "spreadgym/SpreaderTuning-v1"]  # v1: its one namespaced id
+    for key in keys:
+        entry = data[key]
+        assert {"n_timesteps", "policy"} <= set(entry)
+        assert not {"env", "seed", "checkpoint_freq", "max_minutes"} & set(entry)  # zoo's own arguments
 
 
 def test_zoo_path_command():
@@ -230,6 +231,27 @@ def test_zoo_reads_the_shipped_file_and_trains(algo, tmp_path):
     assert (tmp_path / algo / "SpinnerDesign-v0_1" / "SpinnerDesign-v0.zip").is_file()
 
 
+def test_zoo_trains_a_v1_task_in_subprocesses_and_evaluate_scores_its_model(tmp_path):
+    """The v1 id through `python -m spreadgym.envs.zoo train` (which imports spreadgym, so the
+    forkserver workers of --vec-env subproc know the id); `spreadgym evaluate` then reads
+    the env id and kwargs from zoo's args.yml."""
+    pytest.importorskip("rl_zoo3")
+    env_id = "spreadgym/SpinnerDesign-v1"
+    args = ["-m", "spreadgym.envs.zoo", "train", "--algo", "ppo", "--env", env_id, "-conf",
+            str(hyperparams_path("ppo")), "--num-threads", "1", "-f", str(tmp_path), "--env-kwargs", "granules:32",
+            "--vec-env", "subproc", "-n", "64"]
+    out = run_python(args, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    models = [p for p in (tmp_path / "ppo").glob("*/*.zip") if p.name != "best_model.zip"]
+    assert len(models) == 1
+    out = run_python(["-m", "spreadgym.cli.main", "evaluate", "--model", str(models[0]), "--granules", "32",
+                      "--fertilizers", "pellet", "--json", "--no-plots", "--out", str(tmp_path / "eval")])
+    assert out.returncode == 0, out.stderr[-2000:]
+    data = yaml.safe_load(out.stdout)
+    assert data["kind"] == "zoo" and data["env"] == "spreadgym:spreadgym/SpinnerDesign-v1"
+    assert data["env_kwargs"] == {"granules": 32} and len(data["rows"]) == 4  # pellet at the four held-out widths
+
+
 # -- RLlib (only when installed: the `rllib` extra, in its own venv) -----------------------------------
 def test_rllib_trains_one_iteration_with_the_namespaced_id():
     pytest.importorskip("ray.rllib")
@@ -237,7 +259,7 @@ def test_rllib_trains_one_iteration_with_the_namespaced_id():
         import spreadgym.envs
         from ray.rllib.algorithms.ppo import PPOConfig
         spreadgym.envs.register_rllib()
-        config = (PPOConfig().environment("spreadgym/SpinnerDesign-v0", env_config={"granules": 32})
+        config = (PPOConfig().environment("spreadgym/SpinnerDesign-v1", env_config={"granules": 32})
                   .env_runners(num_env_runners=1, sample_timeout_s=600)  # a loaded CI machine: no empty sample
                   .training(train_batch_size=16, minibatch_size=8, num_epochs=1))
         algo = config.build_algo()

@@ -202,6 +202,20 @@ def test_cv_curve_default_widths():
     assert np.all(np.isfinite(cvs))
 
 
+def test_cv_curve_of_a_tray_width_with_more_decimals_than_its_rounding():
+    """A continuous-swath job's trays are W / k wide (envs, `swath_draw: continuous`); the curve's
+    widths are rounded to the nanometre, and must still count as whole numbers of trays. The
+    curve equals the one computed at the same widths unrounded; an off-grid width is still refused."""
+    w = 2.888263574960896 / 6  # 0.48137726249...
+    trays = triangle_trays(12.0, w=w)
+    widths, cvs = cv_curve(trays, "back-and-forth")
+    exact = [cv_percent(trays, k * w, "back-and-forth") for k in range(1, widths.size + 1)]
+    np.testing.assert_allclose(cvs, exact, rtol=0, atol=0)
+    assert cv_percent(trays, 6 * w, "back-and-forth") == cvs[5]
+    with pytest.raises(ConfigError, match="not a positive multiple"):
+        cv_percent(trays, 6 * w + 1e-6, "back-and-forth")
+
+
 @pytest.mark.parametrize("driving", DRIVING)
 def test_effective_swath_triangle(driving):
     trays = triangle_trays(48.0)
