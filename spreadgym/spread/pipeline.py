@@ -19,7 +19,7 @@ from spreadgym.config.scene import Flight, Scene
 from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.departure import Departure, tilted_by_cone
 from spreadgym.physics.granules import GranuleBatch, sample_granules
-from spreadgym.physics.selection import SPINNER_MODELS
+from spreadgym.physics.selection import DEFLECTOR_METHODS, SPINNER_MODELS
 from spreadgym.spread import discs, estimate, pattern, rotations, twin
 from spreadgym.spread import flight as flight_model
 from spreadgym.spread.metrics import RunMetrics
@@ -113,9 +113,12 @@ def run_scene(
     return result
 
 
-def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) -> SimulationResult:
+def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True,
+                 deflector: Optional[str] = None) -> SimulationResult:
     """The rest of the chain after the spinner runs (`departures`, one per `plan.spinner_runs()`):
-    cone, deflectors, release-angle copies, flight, trays and metrics (wall_s left 0)."""
+    cone, deflectors, release-angle copies, flight, trays and metrics (wall_s left 0).
+    `deflector`: a plate stage (selection.DEFLECTOR_METHODS) other than the model's own,
+    for the studies that compare plate stages on the same departures."""
     scene, parts, chosen, first_replicate = plan.scene, plan.parts, plan.chosen, plan.first_replicate
     throws: list[discs.Throw] = []
     turns: list[rotations.Turn] = []  # each disc's release-angle copies (spread.rotations)
@@ -129,7 +132,8 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
             continue
         granules, contacts = spin
         departure = tilted_by_cone(next(spun), np.radians(disc.scene.spinner.cone_deg))
-        launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
+        launch = DEFLECTOR_METHODS[deflector or SPINNER_MODELS[chosen].deflector](departure, disc.scene, contacts,
+                                                                                  granules)
         throws.append(discs.Throw(granules, departure, launch))
         copies, copies_reason = rotations.copies_for(disc.scene, len(parts))
         turns.append(rotations.copy_turns(granules, disc.scene, copies, scene.sim.seed, first_replicate))
