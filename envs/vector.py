@@ -33,7 +33,6 @@ from gymnasium.vector.utils import batch_space
 from spreadgym.envs.common.actions import check_action
 from spreadgym.envs.spinner_design import SpinnerDesignEnv
 from spreadgym.errors import ConfigError
-from spreadgym.spread.batch import run_batch
 
 MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
 
@@ -125,7 +124,7 @@ class SpinnerDesignVectorEnv(VectorEnv):
             if not self._autoreset[i] and env._context is not None:  # a sub-env that needs a reset fails in step
                 settings = task.settings_map.to_settings(check_action(actions[i], task.settings_map.size))
                 scenes.append(task.settings_scene(env._scene, settings, env._sim_seed))
-        results = run_batch(scenes, model=task.cfg.model, library=task.library, ci=task.cfg.confidence_interval)
+        results = task.run_batch(scenes)
         task.run = _Prefetched(scenes, results)  # step() below takes them; then Task.run again
 
     def close_extras(self, **kwargs: Any):
@@ -163,7 +162,7 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
         env.reset(seed=seed, options=options)
         settings = task.settings_map.to_settings(check_action(action, task.settings_map.size))
         scenes.append(task.settings_scene(base._scene, settings, base._sim_seed))
-    results = run_batch(scenes, model=task.cfg.model, library=task.library, ci=task.cfg.confidence_interval)
+    results = task.run_batch(scenes)
     task.run = _Prefetched(scenes, results)
     try:
         steps = []

@@ -172,6 +172,9 @@ class DesignConfig(StrictModel):
     scene: str = Field(default="paper", description="shipped scene name or YAML path")
     scene_overrides: dict[str, Any] = Field(default_factory=dict, description="dotted scene keys")
     model: str = Field(default="auto", description="spinner model (see spreadgym.physics.selection)")
+    device: Optional[Literal["cpu", "cuda"]] = Field(
+        default=None, description="where the compiled spinner runs: cpu, or cuda (a GPU: `pip install "
+                                  "spreadgym[cuda]`); null: SPREADGYM_DEVICE, else cpu (spreadgym.device)")
     granules: Optional[Integer] = Field(
         default=None, ge=1, le=1_000_000,
         description="granules simulated per step, each at sim.angle_copies release angles; null: the scene's own "
