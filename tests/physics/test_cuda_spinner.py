@@ -1,12 +1,7 @@
-"""The CUDA backend (spreadgym.device, physics.compiled.cuda_spinner) under numba's CUDA
-simulator (NUMBA_ENABLE_CUDASIM=1, in a fresh interpreter: the flag is read when numba's
-CUDA target loads): the kernel's granule index, design index, copies in and out, against
-the CPU kernel on small batches; and the one-line errors where no GPU is found."""
-
-import json
-import os
-import subprocess
-import sys
+"""The CUDA backend (spreadgym.device, physics.compiled.cuda_spinner; the envs' `device` in
+tests/envs/test_env_device.py) under numba's CUDA simulator (the `cuda_simulator` fixture):
+the kernel's granule index, design index, copies in and out, against the CPU kernel on
+small batches; and the one-line errors where no GPU is found."""
 
 import pytest
 
@@ -40,36 +35,16 @@ print(json.dumps({"rows": rows, "launches": launches}))
 """
 
 
-def simulated(script: str) -> dict:
-    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
-    env.pop(device.ENV_VAR, None)
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=900, env=env)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout.strip().splitlines()[-1])
-
-
-def test_the_cuda_kernel_gives_the_cpu_results_in_one_launch_per_batch():
+def test_the_cuda_kernel_gives_the_cpu_results_in_one_launch_per_batch(cuda_simulator):
     """Outcome counts equal, tray masses within 1e-12 relative (the simulator runs the CPU's
     scalar code, so here they are equal to the bit; a real GPU may differ in the last bits
     where it fuses multiply-adds); one launch for the whole batch at two threads."""
-    found = simulated(SIMULATED)
+    found = cuda_simulator(SIMULATED)
     for row in found["rows"]:
         assert row["outcomes"][0] == row["outcomes"][1]
         assert row["tray_rel"] <= 1e-12
         assert row["departures_equal"]
     assert found["launches"] == [24 * 4]  # every scene's granules (twin-field's second disc is its first mirrored)
-
-
-def test_an_env_on_the_simulated_gpu_steps_as_on_the_cpu():
-    found = simulated(
-        "import json, gymnasium as gym, spreadgym\n"
-        "out = []\n"
-        "for dev in ('cpu', 'cuda'):\n"
-        "    env = gym.make('spreadgym/SpinnerDesign-v0', granules=32, device=dev)\n"
-        "    env.reset(seed=3)\n"
-        "    out.append(env.step(env.action_space.sample() * 0)[1])\n"
-        "print(json.dumps({'rewards': out}))\n")
-    assert found["rewards"][0] == found["rewards"][1]
 
 
 @pytest.mark.skipif(device.cuda_available(), reason="a CUDA GPU is present: the no-GPU errors do not apply")
@@ -78,12 +53,6 @@ def test_cuda_without_a_gpu_is_a_one_line_error(capsys, monkeypatch):
     assert main(["simulate", "--device", "cuda", "--set", "sim.granules=16"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--device" in err and "no CUDA GPU" in err
-    with pytest.raises(ConfigError, match="device: cuda: no CUDA GPU"):
-        import gymnasium as gym
-
-        import spreadgym  # noqa: F401
-
-        gym.make("spreadgym/SpinnerDesign-v0", device="cuda")
     monkeypatch.setenv(device.ENV_VAR, "cuda")
     with pytest.raises(ConfigError, match=device.ENV_VAR):
         device.current()
