@@ -178,7 +178,7 @@ class DesignConfig(StrictModel):
     granules: Optional[Integer] = Field(
         default=None, ge=1, le=1_000_000,
         description="granules simulated per step, each at sim.angle_copies release angles; null: the scene's own "
-                    "sim.granules (2048 on the shipped scenes, 4096 on the plate scene, whose plates need them)")
+                    "sim.granules (2048 on every shipped scene)")
     precision: Optional[Real] = Field(
         default=None, ge=0.001, le=100.0,
         description="null: a fixed budget per step (one run of `granules`; the env's speed is its contract); "
