@@ -43,7 +43,7 @@ def warm() -> float:
 
 
 def main() -> int:
-    print("spreadgym: compiling and caching the numba kernels (once per install: about a minute of CPU) ...",
+    print("spreadgym: compiling and caching the numba kernels (once per install: under a minute on two cores) ...",
           file=sys.stderr, flush=True)
     print(f"spreadgym: kernels ready in {warm():.0f} s", file=sys.stderr)
     return 0
