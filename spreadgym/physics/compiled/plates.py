@@ -8,9 +8,10 @@ deflector zone. It is the limit the pymunk plate stage converges to as its step 
 (the stepped contact is found one step late, up to a step's travel inside the plate:
 docs/fidelity.md measures the difference falling with the step).
 
-Every function here is scalar code on floats and flat arrays, so the same functions run
-per granule on the CPU (these kernels) and on a GPU (spreadgym.device). Plates are rows
-of a float array `plates` (K, PLATE_SIZE), in the frame the states are in.
+Every function here is scalar code on floats and flat arrays (what numba.cuda could
+compile as the spinner's functions are, spreadgym.device; only the spinner stage runs
+on a GPU so far). Plates are rows of a float array `plates` (K, PLATE_SIZE), in the
+frame the states are in.
 """
 
 from __future__ import annotations
