@@ -12,27 +12,37 @@ RLSTAMP := $(RLVENV)/.installed-stamp
 
 .PHONY: demo test bench venv clean
 
+# After installing, and after an edit of a kernel's source, compile the numba kernels once into
+# their caches (spreadgym.warm), so that the first simulation or env step loads them (seconds)
+# instead of compiling them (a minute or more; the test workers would each compile them).
+WARMSTAMP := $(VENV)/.kernels-stamp
+KERNELS := $(wildcard spreadgym/physics/*.py spreadgym/physics/compiled/*.py spreadgym/spread/*.py)
+
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --constraint constraints.txt --editable ".[dev]"
 	touch $(STAMP)
+
+$(WARMSTAMP): $(STAMP) $(KERNELS)
+	$(BIN)/python -m spreadgym.warm
+	touch $(WARMSTAMP)
 
 $(RLSTAMP): pyproject.toml constraints.txt
 	test -x $(RLVENV)/bin/python || $(PYTHON) -m venv $(RLVENV)
 	$(RLVENV)/bin/python -m pip install --quiet --constraint constraints.txt --editable ".[dev,zoo,rllib]"
 	touch $(RLSTAMP)
 
-venv: $(STAMP)
+venv: $(WARMSTAMP)
 
-demo: $(STAMP)
+demo: $(WARMSTAMP)
 	$(BIN)/spreadgym demo
 
-test: $(STAMP) $(RLSTAMP)
+test: $(WARMSTAMP) $(RLSTAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q -n auto
 	$(RLVENV)/bin/python -m pytest -q -n auto tests/envs/test_rl_tools.py
 
-bench: $(STAMP)
+bench: $(WARMSTAMP)
 	$(BIN)/spreadgym bench
 
 clean:

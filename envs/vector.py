@@ -45,7 +45,6 @@ from spreadgym.config.scene import check_pooled_work
 from spreadgym.envs.common.task import batches_library
 from spreadgym.envs.spinner_design import SpinnerDesignEnv
 from spreadgym.errors import ConfigError
-from spreadgym.spread.batch import run_batch
 
 MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP,
          "disabled": AutoresetMode.DISABLED}
@@ -175,7 +174,7 @@ class SpinnerDesignVectorEnv(VectorEnv):
         if not batched(self.envs[0]) or library is None:
             return
         scenes = [self.envs[i].design_scene(actions[i])[0] for i in stepping]
-        results = run_batch(scenes, model=task.cfg.model, library=library, ci=task.cfg.confidence_interval)
+        results = task.run_batch(scenes, library)
         task.run = _Prefetched(scenes, results)  # step() below takes them; then Task.run again
 
     def close_extras(self, **kwargs: Any):
@@ -215,7 +214,7 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
     library = batches_library(task.library, batches)
     if library is None:
         return _one_by_one(env, resets, actions)
-    results = run_batch(scenes, model=task.cfg.model, library=library, ci=task.cfg.confidence_interval)
+    results = task.run_batch(scenes, library)
     task.run = _Prefetched(scenes, results)
     try:
         steps = []

@@ -1,4 +1,9 @@
-"""Shared fixtures: the material library and small, fast scenes."""
+"""Shared fixtures: the material library, small fast scenes, numba's CUDA simulator."""
+
+import json
+import os
+import subprocess
+import sys
 
 import pytest
 
@@ -25,11 +30,28 @@ def prepare(library):
 
 @pytest.fixture(autouse=True)
 def _default_thread_count():
-    """A command run in a test (`--threads N`) sets the process's thread count: put it back."""
+    """A command run in a test (`--threads N`) sets the process's thread count (and device): put them back."""
     yield
+    from spreadgym.device import set_device
     from spreadgym.threads import set_threads
 
     set_threads(None)
+    set_device(None)
+
+
+@pytest.fixture
+def cuda_simulator():
+    """Run a script in a fresh interpreter under numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1,
+    read when numba's CUDA target loads) and return the JSON it prints last."""
+
+    def _run(script: str) -> dict:
+        env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
+        env.pop("SPREADGYM_DEVICE", None)
+        done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=900, env=env)
+        assert done.returncode == 0, done.stderr[-3000:]
+        return json.loads(done.stdout.strip().splitlines()[-1])
+
+    return _run
 
 
 def _listening_sockets(root: int) -> list[tuple[str, int, str, bool]]:

@@ -14,15 +14,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LAYERS = (  # lowest first; errors, report, threads and heap are plain helpers every layer may use
-    ("spreadgym.errors", "spreadgym.report", "spreadgym.threads", "spreadgym.heap"),
+LAYERS = (  # lowest first; errors, report, threads, device and heap are plain helpers every layer may use
+    ("spreadgym.errors", "spreadgym.report", "spreadgym.threads", "spreadgym.device", "spreadgym.heap"),
     ("spreadgym.config", "spreadgym.out_folder"),  # out_folder: the --out rule of every command
     ("spreadgym.physics",),
     ("spreadgym.spread",),
     ("spreadgym.viz",),
     ("spreadgym.fit",),  # fitting a scene to a tray test: runs the spread chain, draws with viz
     ("spreadgym.studies",),
-    ("spreadgym.cli",),
+    ("spreadgym.cli", "spreadgym.warm"),  # entry points: the commands, and the kernels' warm-up at install
     ("spreadgym.envs",),
     ("spreadgym.agents",),
 )

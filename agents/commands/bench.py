@@ -17,7 +17,7 @@ from spreadgym.report import format_table
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
             "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "honesty", "env-noise",
             "chart-quality", "fit", "batch", "validation", "server", "web",
-            "advise", "rl-benchmark")
+            "advise", "rl-benchmark", "plates")
 """Every section, in the order `make bench` runs them (`section_runners` gives each its work)."""
 
 
@@ -49,6 +49,7 @@ def section_runners(args: argparse.Namespace, say) -> dict:
         fidelity,
         fit_bench,
         magnus,
+        plates,
         references,
         speed_accuracy,
         stability,
@@ -85,6 +86,7 @@ def section_runners(args: argparse.Namespace, say) -> dict:
         "web": lambda: web_bench.web_rows(repeats=max(args.repeats, 5), progress=say),
         "advise": lambda: advise_bench.advise_bench_rows(args.out / "advise", tests=20, progress=say),
         "rl-benchmark": lambda: rl_benchmark_rows(args.out, say),
+        "plates": lambda: plate_rows(plates, args.out, say),
     }
 
 
@@ -188,6 +190,14 @@ def precision_rows(estimate_bench, out: Path, say) -> list[dict]:
     return rows
 
 
+def plate_rows(plates, out: Path, say) -> list[dict]:
+    """The compiled plate stage against the pymunk one on the reference family's plate
+    settings, paired on the same departures; also as markdown (plates.md)."""
+    rows = plates.plate_stage_rows(progress=say)
+    (out / "plates.md").write_text(plates.plates_markdown(rows), encoding="utf-8")
+    return rows
+
+
 def env_reward_noise(seeds: int = 24) -> list[dict]:
     """SpinnerDesign at its default budget: the s.d. over seeds of the CV (pp) and of the
     reward for one job and one action (compound 10-16-10 on the paper scene's own job,
@@ -219,7 +229,7 @@ def env_reward_noise(seeds: int = 24) -> list[dict]:
 
 def env_steps_per_second(steps: int = 20, repeats: int = 5) -> list[dict]:
     """Env steps per second at the default config of each environment (one process), on
-    the paper, field and twin-field scenes: the median of `repeats` blocks of `steps`
+    the paper, field, twin-field and plate scenes: the median of `repeats` blocks of `steps`
     random steps after one warm-up step (which compiles the fast model), with the blocks'
     range."""
     import statistics
@@ -229,7 +239,7 @@ def env_steps_per_second(steps: int = 20, repeats: int = 5) -> list[dict]:
 
     rows = []
     for env_id in ("spreadgym:SpinnerDesign-v0", "spreadgym:SpreaderTuning-v0"):
-        for scene in ("paper", "field", "twin-field"):
+        for scene in ("paper", "field", "twin-field", "paper-deflectors"):
             env = gym.make(env_id, scene=scene)
             env.reset(seed=0)
             env.action_space.seed(0)

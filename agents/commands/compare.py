@@ -50,6 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=arguments.THREADS, metavar="N",
                         help="threads in all, shared by the --workers (default: SPREADGYM_THREADS, else every core "
                              "this process may use); each search evaluates its batches on its share")
+    arguments.add_device(parser)
     parser.add_argument("--json", action="store_true", help="print the table and rows as JSON")
     parser.add_argument("--out", type=arguments.output_folder, default=Path("out/compare"), metavar="DIR",
                         help="folder for compare.csv/.md/.json and compare.png (default out/compare; a comparison's "
@@ -103,6 +104,12 @@ def run(args: argparse.Namespace) -> int:
         raise SpreadgymError(f"--workers must be at least 1, got {args.workers}")
     if args.seeds < 1:
         raise SpreadgymError(f"--seeds must be at least 1, got {args.seeds}")
+    if args.device is not None:
+        from spreadgym.device import checked
+
+        checked(args.device, "--device")
+        if args.device == "cuda" and args.workers > 1:  # one process drives the GPU: the two never multiply
+            raise SpreadgymError("--device cuda: one process drives the GPU; use --workers 1")
     started = time.perf_counter()
     from spreadgym.threads import set_threads, thread_count
 
@@ -112,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
     env_id = ev.canonical_env_id(args.env or (policies[0][1].env_id if policies else DEFAULT_ENV))
     train_kwargs = policies[0][1].env_kwargs if policies else {}
     env_kwargs = evaluation_env_kwargs(train_kwargs, args.granules)
+    if args.device is not None:
+        env_kwargs["device"] = args.device
     env = _env(env_id, env_kwargs)  # checks the kwargs here
     if "SpinnerDesign" not in env_id:
         raise SpreadgymError(f"--env {env_id}: compare needs a SpinnerDesign task (the searches set absolute "

@@ -225,10 +225,13 @@ class DesignConfig(StrictModel):
     scene: str = Field(default="paper", description="shipped scene name or YAML path")
     scene_overrides: dict[str, Any] = Field(default_factory=dict, description="dotted scene keys")
     model: str = Field(default="auto", description="spinner model (see spreadgym.physics.selection)")
+    device: Optional[Literal["cpu", "cuda"]] = Field(
+        default=None, description="where the compiled spinner runs: cpu, or cuda (a GPU: `pip install "
+                                  "spreadgym[cuda]`); null: SPREADGYM_DEVICE, else cpu (spreadgym.device)")
     granules: Optional[Integer] = Field(
         default=None, ge=1, le=1_000_000,
         description="granules simulated per step, each at sim.angle_copies release angles; null: the scene's own "
-                    "sim.granules (2048 on the shipped scenes, 4096 on the plate scene, whose plates need them)")
+                    "sim.granules (2048 on every shipped scene)")
     precision: Optional[Real] = Field(
         default=None, ge=0.001, le=100.0,
         description="null: a fixed budget per step (one run of `granules`; the env's speed is its contract); "

@@ -18,6 +18,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from spreadgym import device
 from spreadgym.config.base import brief
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import MIN_BOUT_TRAYS, Scene, load_scene, scene_with
@@ -26,6 +27,7 @@ from spreadgym.envs.common.config import DesignConfig
 from spreadgym.errors import ConfigError, MaterialError
 from spreadgym.physics.contacts import resolve_contacts
 from spreadgym.physics.selection import choose_model
+from spreadgym.spread.batch import run_batch
 from spreadgym.spread.metrics import RunMetrics
 from spreadgym.spread.pipeline import SimulationResult, run_scene
 from spreadgym.spread.precision import simulate_precisely
@@ -124,6 +126,8 @@ class Task:
 
     def __init__(self, cfg: DesignConfig):
         self.cfg = cfg
+        if cfg.device is not None:
+            device.checked(cfg.device, "device")  # a GPU asked for where there is none: fail at make
         self.library = load_library()
         # a job's scene would be rebuilt and re-validated every episode (scenes are immutable);
         # a plain dict, so the task still pickles and deep-copies
@@ -361,11 +365,19 @@ class Task:
         a hidden `batch`, with its library (the perturbed density)."""
         tracks = self.cfg.render.disc_tracks if rendering else 0
         library = self.library if batch is None else batch.library
-        if self.cfg.precision is not None:
-            return simulate_precisely(scene, self.cfg.precision, model=self.cfg.model, library=library,
-                                      tracks=tracks).as_result()
-        return run_scene(scene, model=self.cfg.model, library=library, ci=self.cfg.confidence_interval,
-                         tracks=tracks)
+        with device.using(self.cfg.device):
+            if self.cfg.precision is not None:
+                return simulate_precisely(scene, self.cfg.precision, model=self.cfg.model, library=library,
+                                          tracks=tracks).as_result()
+            return run_scene(scene, model=self.cfg.model, library=library, ci=self.cfg.confidence_interval,
+                             tracks=tracks)
+
+    def run_batch(self, scenes: list[Scene], library: Optional[MaterialLibrary] = None) -> list[SimulationResult]:
+        """The tray tests of `scenes` as one batch (spreadgym.spread.batch), on the env's device,
+        with `library` (default the task's; a hidden batch's holds each episode's fertilizer copy)."""
+        with device.using(self.cfg.device):
+            return run_batch(scenes, model=self.cfg.model, library=library or self.library,
+                             ci=self.cfg.confidence_interval)
 
 
 def _free_segments(span: tuple[float, float], bands) -> list[tuple[float, float]]:

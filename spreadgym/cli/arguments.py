@@ -87,3 +87,10 @@ def add_materials_flag(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--materials", type=materials_file, metavar="FILE",
                         help="your materials file (configs/materials.yaml's layout) merged over the library: its "
                              "fertilizers can be named in the scene or with --set fertilizer=NAME")
+
+
+def add_device(parser: argparse.ArgumentParser) -> None:
+    """`--device cpu|cuda`: where the compiled spinner runs (spreadgym.device)."""
+    parser.add_argument("--device", choices=("cpu", "cuda"),
+                        help="where the compiled spinner runs: cpu, or cuda (an NVIDIA GPU; `pip install "
+                             "spreadgym[cuda]`) (default: SPREADGYM_DEVICE, else cpu)")

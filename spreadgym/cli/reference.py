@@ -11,6 +11,7 @@ from spreadgym.cli import arguments
 from spreadgym.cli.simulate import precision_flag
 from spreadgym.config.overrides import parse_assignments
 from spreadgym.config.scene import load_scene
+from spreadgym.device import set_device
 from spreadgym.errors import ConfigError, SpreadgymError
 from spreadgym.physics.selection import MODELS
 from spreadgym.report import format_table, print_json, with_error
@@ -36,12 +37,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=arguments.THREADS, metavar="N",
                         help="threads to use (default: SPREADGYM_THREADS, else every core this process may use)")
     arguments.add_materials_flag(parser)
+    arguments.add_device(parser)
     parser.add_argument("--json", action="store_true", help="print the reference as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
     if args.threads is not None:
         set_threads(args.threads)
+    if args.device is not None:
+        set_device(args.device)
     if args.replicates is not None and args.replicates < MIN_RUNS:
         raise SpreadgymError(f"--replicates: {args.replicates} must be at least {MIN_RUNS}")
     overrides = parse_assignments(args.overrides)

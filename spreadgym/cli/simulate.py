@@ -46,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=arguments.THREADS, metavar="N",
                         help="threads to use (default: SPREADGYM_THREADS, else every core this process may use)")
     arguments.add_materials_flag(parser)
+    arguments.add_device(parser)
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
     parser.add_argument("--plot", type=arguments.output_folder, metavar="DIR",
                         help="write PNG pictures into DIR (made when the run is done; never over an input)")
@@ -59,11 +60,14 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from spreadgym.config.scene import load_scene
+    from spreadgym.device import set_device
     from spreadgym.spread.precision import simulate_precisely
     from spreadgym.threads import set_threads
 
     if args.threads is not None:
         set_threads(args.threads)
+    if args.device is not None:
+        set_device(args.device)
     scene = load_scene(args.scene, parse_assignments(args.overrides), args.materials)
     plots = None
     if args.plot:

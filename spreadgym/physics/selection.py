@@ -48,8 +48,8 @@ def _deflect_in_pymunk(departure: Departure, scene: Scene, contacts: Contacts, g
 
 
 DEFLECTOR_METHODS: dict[str, Callable[[Departure, Scene, Contacts, GranuleBatch], Departure]] = {
-    "rays": _deflect_by_rays,  # exact plan-view reflections (closed form)
-    "pymunk": _deflect_in_pymunk,  # plates stepped in pymunk, with the spinner model's contact laws
+    "rays": _deflect_by_rays,  # exact plan-view bounces, compiled: the pymunk stage's limit as its step shrinks
+    "pymunk": _deflect_in_pymunk,  # plates stepped in pymunk
 }
 """Deflector method name -> function(departure, scene, contacts, granules) giving the launch state."""
 
@@ -94,8 +94,9 @@ SPINNER_MODELS: dict[str, SpinnerModel] = {m.name: m for m in (
                  "the full model: drop, disc bounces and drag, impulse contacts with the vanes"),
     SpinnerModel("spring-damper", "spreadgym.physics.stepped.spring_damper:simulate_spring_damper", "pymunk",
                  "the seed paper's spring-dashpot vane contact with the measured contact time"),
-    SpinnerModel("compiled", "spreadgym.physics.compiled.model:simulate_compiled", "pymunk",
-                 "the pymunk model's contact laws per granule, event-driven and compiled with numba",
+    SpinnerModel("compiled", "spreadgym.physics.compiled.model:simulate_compiled", "rays",
+                 "the pymunk model's contact laws per granule, event-driven and compiled with numba; "
+                 "plates by the same event-driven bounces",
                  batch_runner="spreadgym.physics.compiled.model:simulate_compiled_batch"),
 )}
 
@@ -127,6 +128,12 @@ def _rolling_resistance(scene: Scene) -> float:
         return 0.0
 
 
+PLATE_CLEARANCE_M = 0.02
+"""Plates closer than this (the largest granule diameter a scene allows) could hold a
+granule against two at once; the compiled plate stage takes one bounce at a time and
+was measured where plates stand apart (docs/fidelity.md)."""
+
+
 def outside_validated(scene: Scene) -> list[str]:
     """What puts `scene` outside the envelope `compiled` was validated in (empty: inside)."""
     values = {"rpm": [scene.spinner.rpm], "pitch_deg": scene.vanes.per_vane("pitch_deg"),
@@ -137,6 +144,24 @@ def outside_validated(scene: Scene) -> list[str]:
         bad = [v for v in values[key] if not lo - 1e-9 <= v <= hi + 1e-9]
         if bad:
             out.append(f"{key} {bad[0]:g} outside [{lo:g}, {hi:g}]")
+    return out + _plates_too_close(scene)
+
+
+def _plates_too_close(scene: Scene) -> list[str]:
+    """The pairs of plates whose capsules stand closer than PLATE_CLEARANCE_M."""
+    plates = scene.deflectors
+    if len(plates) < 2:
+        return []
+    from spreadgym.physics.compiled.plates import segment_distance  # numba: only for scenes with two plates
+
+    out = []
+    for i in range(len(plates)):
+        for j in range(i + 1, len(plates)):
+            (a, b), (c, d) = plates[i].endpoints(), plates[j].endpoints()
+            gap = segment_distance(*a, *b, *c, *d) - 0.5 * (plates[i].thickness_m + plates[j].thickness_m)
+            if gap < PLATE_CLEARANCE_M:
+                out.append(f"deflectors {i} and {j} {gap * 1e3:.3g} mm apart (under {PLATE_CLEARANCE_M * 1e3:g} mm: "
+                           "a granule may touch both at once)")
     return out
 
 
@@ -150,7 +175,11 @@ def choose_model(scene: Scene, requested: str = "auto") -> tuple[str, str]:
     if outside:
         return "pymunk", (f"auto: {'; '.join(outside)}, where the fast compiled model has not been checked "
                           "against the full model, so the full model runs")
-    return "compiled", ("auto: the compiled model (the full model's contact laws per granule) matches the "
-                        "converged full model within 0.5 pp of CV on all 22 reference scenes (within 0.3 pp on 20; "
-                        "twin-field 0.45 pp low; rolling resistance 0-0.31 included) and with the same effective "
-                        "swath on all 19 (docs/fidelity.md), ~200x cheaper")
+    reason = ("auto: the compiled model (the full model's contact laws per granule) matches the "
+              "converged full model within 0.5 pp of CV on all 22 reference scenes (within 0.3 pp on 20; "
+              "twin-field 0.45 pp low; rolling resistance 0-0.31 included) and with the same effective "
+              "swath on all 19 (docs/fidelity.md), ~200x cheaper")
+    if scene.deflectors:
+        reason += ("; its plates bounce granules event by event, the limit the full model's stepped plate stage "
+                   "converges to (docs/fidelity.md)")
+    return "compiled", reason

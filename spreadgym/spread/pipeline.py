@@ -16,11 +16,10 @@ import numpy as np
 from spreadgym import heap
 from spreadgym.config.materials import MaterialLibrary, load_library
 from spreadgym.config.scene import Flight, Scene
-from spreadgym.physics.analytic.deflector_rays import deflect as deflect_by_rays
 from spreadgym.physics.contacts import Contacts, resolve_contacts
 from spreadgym.physics.departure import Departure, tilted_by_cone
 from spreadgym.physics.granules import GranuleBatch, sample_granules
-from spreadgym.physics.selection import SPINNER_MODELS
+from spreadgym.physics.selection import DEFLECTOR_METHODS, SPINNER_MODELS
 from spreadgym.spread import discs, estimate, pattern, rotations, twin
 from spreadgym.spread import flight as flight_model
 from spreadgym.spread.metrics import RunMetrics
@@ -114,9 +113,12 @@ def run_scene(
     return result
 
 
-def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) -> SimulationResult:
+def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True,
+                 deflector: Optional[str] = None) -> SimulationResult:
     """The rest of the chain after the spinner runs (`departures`, one per `plan.spinner_runs()`):
-    cone, deflectors, release-angle copies, flight, trays and metrics (wall_s left 0)."""
+    cone, deflectors, release-angle copies, flight, trays and metrics (wall_s left 0).
+    `deflector`: a plate stage (selection.DEFLECTOR_METHODS) other than the model's own,
+    for the studies that compare plate stages on the same departures."""
     scene, parts, chosen, first_replicate = plan.scene, plan.parts, plan.chosen, plan.first_replicate
     throws: list[discs.Throw] = []
     turns: list[rotations.Turn] = []  # each disc's release-angle copies (spread.rotations)
@@ -130,7 +132,8 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
             continue
         granules, contacts = spin
         departure = tilted_by_cone(next(spun), np.radians(disc.scene.spinner.cone_deg))
-        launch = SPINNER_MODELS[chosen].deflect(departure, disc.scene, contacts, granules)
+        launch = DEFLECTOR_METHODS[deflector or SPINNER_MODELS[chosen].deflector](departure, disc.scene, contacts,
+                                                                                  granules)
         throws.append(discs.Throw(granules, departure, launch))
         copies, copies_reason = rotations.copies_for(disc.scene, len(parts))
         turns.append(rotations.copy_turns(granules, disc.scene, copies, scene.sim.seed, first_replicate))
@@ -209,11 +212,10 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True) 
 
 def _plate_sample(throw: discs.Throw, disc: Scene, contacts: Contacts, landing_m: np.ndarray,
                   turn: rotations.Turn) -> estimate.TraySample:
-    """The tray sample of one disc's release-angle copies among plates: copies whose path
-    clears the plates land as their granule's plate-free throw, turned (it flies once per
-    granule); copy 0 is the granule's own run; the other copies near a plate pass the
-    plates by the closed-form ray stage (`deflector_rays`, within 2 % of the pymunk stage)
-    and fly each on its own."""
+    """The tray sample of one disc's release-angle copies among plates: copy 0 is the
+    granule's own run; a copy whose turned path the plates bounce (the compiled plate
+    stage, the model's own for `compiled`) flies on its own; every other copy meets no
+    plate and lands as its granule's plate-free throw, turned (it flies once per granule)."""
     plates, g = disc.deflectors, throw.granules
     free = rotations.straight_paths(throw.departure, plates, g.radius_m)
     near = rotations.near_own_paths(throw, free, plates)
@@ -221,16 +223,12 @@ def _plate_sample(throw: discs.Throw, disc: Scene, contacts: Contacts, landing_m
     height = np.full(g.count, disc.spinner.height_m)
     if near.any():
         free_landing[near] = _flight(free, g, near, height, disc.flight, None).position_m
-    copies = rotations.plate_copies(throw, free, turn, plates)
-    replayed = copies.replayed
-    turned = rotations.turned_departures(throw.departure, copies, replayed)
-    who = copies.granule[replayed]
-    launch = deflect_by_rays(turned, plates, contacts, g.radius_m[who], disc.granule.rotation)
-    landed = _flight(launch, dataclasses.replace(g, diameter_m=g.diameter_m[who], mass_kg=g.mass_kg[who],
-                                                 release_xy_m=g.release_xy_m[who], phase_rad=g.phase_rad[who],
-                                                 replicate=g.replicate[who]),
-                     np.ones(who.size, dtype=bool), height[who], disc.flight, None)
-    return rotations.plate_copied_sample(throw, copies, landing_m, free_landing, landed.position_m[:, 0], turn.copies)
+    replays = rotations.plate_replays(throw, free, turn, plates, contacts.deflectors, disc.granule.rotation,
+                                      disc.spinner.height_m)
+    who = replays.granule(g.count)
+    landed = flight_model.fly(replays.position_m, replays.height_m, replays.velocity_m_s, g.diameter_m[who],
+                              g.density_kg_m3, disc.flight, spin_rad_s=replays.spin_rad_s)
+    return rotations.plate_copied_sample(throw, turn, landing_m, free_landing, replays, landed.position_m[:, 0])
 
 
 def _flight(launch: Departure, granules: GranuleBatch, flying: np.ndarray, disc_height_m: np.ndarray,

@@ -33,8 +33,8 @@ Plates break the symmetry: a turned granule meets them elsewhere. But a copy who
 straight path clears every plate meets none, so it lands as its granule's plate-free
 throw, turned (one extra flight per granule whose own path comes near a plate); copy 0
 is the granule's own run; the other copies near a plate pass the plates by the
-closed-form ray stage and fly each on their own (`plate_copies`, `plate_copied_sample`;
-spread.pipeline runs the stages).
+compiled plate stage, and those it bounces fly each on their own (`plate_replays`,
+`plate_copied_sample`; spread.pipeline runs the stages).
 
 When they do not apply (`copies_for`): a flight with a direction (wind or forward speed:
 every copy would have to fly), a feed without spread (a single release angle) and
@@ -50,11 +50,11 @@ import numpy as np
 
 from spreadgym.config.scene import Deflector, Flight, Scene
 from spreadgym.physics.compiled.options import KERNEL
-from spreadgym.physics.constants import GRAVITY_M_S2
+from spreadgym.physics.compiled.plates import MAX_BOUNCES, near_plates, pack_plates, pass_plates, path_near_plates
+from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.departure import Departure
-from spreadgym.physics.geometry import advance_to_circle, zone_radius_m
+from spreadgym.physics.geometry import ZONE_MARGIN_M, advance_to_circle, zone_radius_m
 from spreadgym.physics.granules import GranuleBatch, pulled_back_by_clip
-from spreadgym.physics.stepped.pymunk_deflectors import near_plates
 from spreadgym.spread import von_mises
 from spreadgym.spread.discs import Disc, Throw
 from spreadgym.spread.estimate import TraySample
@@ -215,69 +215,113 @@ def near_own_paths(throw: Throw, free: Departure, plates: Sequence[Deflector]) -
     the pymunk stage steps); `free` from `straight_paths`."""
     gone = np.flatnonzero(free.departed)
     near = np.zeros(free.time_s.shape, dtype=bool)
-    near[gone] = near_plates(throw.departure.position_m[gone], free.position_m[gone], throw.granules.radius_m[gone],
-                             plates)
+    near[gone] = near_plates(throw.departure.position_m, free.position_m, throw.granules.radius_m, plates, granule=gone)
     return near
 
 
 @dataclasses.dataclass(frozen=True)
-class PlateCopies:
-    """The departed copies of one disc among plates, copy-major: their granule, copy
-    number, turn (cos, sin) and whether their straight path clears every plate."""
+class PlateReplays:
+    """The copies (k > 0) of one disc's departed granules that the plates turned: their
+    copy-major index k N + j, and their launch states where they leave the plate zone
+    (disc frame; height above the ground, never below it)."""
 
-    granule: np.ndarray
-    copy: np.ndarray
-    cos: np.ndarray
-    sin: np.ndarray
-    clears: np.ndarray
+    row: np.ndarray  # (M,) k N + j
+    position_m: np.ndarray  # (M, 2)
+    height_m: np.ndarray  # (M,)
+    velocity_m_s: np.ndarray  # (M, 3) with the vertical speed
+    spin_rad_s: np.ndarray  # (M,)
 
-    @property
-    def replayed(self) -> np.ndarray:
-        """The copies whose plate stage is run again (near a plate, not the granule itself)."""
-        return ~self.clears & (self.copy > 0)
+    def granule(self, count: int) -> np.ndarray:
+        return self.row % count
 
 
-def plate_copies(throw: Throw, free: Departure, turn: Turn, plates: Sequence[Deflector]) -> PlateCopies:
-    """Which departed copies clear the plates: a copy's straight path is its granule's
-    turned, so it is tested against the plates turned back (`near_plates`, the pymunk
-    stage's test and margin); copy 0 is the granule itself."""
+def plate_replays(throw: Throw, free: Departure, turn: Turn, plates: Sequence[Deflector], contacts: Sequence,
+                  rotation: str, disc_height_m: float) -> PlateReplays:
+    """Every departed copy (k > 0) whose turned straight path comes near a plate
+    (`near_plates`' test and margin) is carried past the plates by the compiled plate
+    stage (`physics.compiled.plates`); those it bounced are returned with their launch
+    states. The others meet no plate and land as their granule's plate-free throw, turned."""
+    g, departure = throw.granules, throw.departure
+    n = g.count
     gone = np.flatnonzero(free.departed)
-    granule = np.tile(gone, turn.copies)
-    copy = np.repeat(np.arange(turn.copies), gone.size)
-    rows = copy * throw.granules.count + granule
-    c, s = turn.cos[rows], turn.sin[rows]
-    clears = ~near_plates(throw.departure.position_m[granule], free.position_m[granule],
-                          throw.granules.radius_m[granule], plates, turn=(c, s))
-    return PlateCopies(granule, copy, c, s, clears)
+    most = (turn.copies - 1) * gone.size
+    out = (np.empty(most, dtype=np.int64), np.empty((most, 2)), np.empty(most), np.empty((most, 3)), np.empty(most))
+    table = pack_plates(plates, [c.friction for c in contacts], [c.restitution for c in contacts])
+    kept = replay_plate_copies(gone, n, turn.copies, turn.cos, turn.sin, departure.position_m, free.position_m,
+                               departure.velocity_m_s, departure.spin_rad_s, departure.height_m,
+                               departure.vertical_velocity_m_s, g.radius_m, table, ZONE_MARGIN_M,
+                               zone_radius_m(plates, float(g.radius_m.max())),
+                               0.0 if rotation == "locked" else 1.0 / SPHERE_INERTIA_FACTOR, MAX_BOUNCES, GRAVITY_M_S2,
+                               disc_height_m, *out)
+    return PlateReplays(*(a[:kept] for a in out))
 
 
-def turned_departures(departure: Departure, copies: PlateCopies, which: np.ndarray) -> Departure:
-    """The disc-edge states of the copies `which` (a mask over `copies`): their granules'
-    states turned by the copies' angles about the disc axis."""
-    g, c, s = copies.granule[which], copies.cos[which], copies.sin[which]
-    p, v = departure.position_m[g], departure.velocity_m_s[g]
-    return Departure(
-        position_m=np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]]),
-        velocity_m_s=np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]]),
-        spin_rad_s=departure.spin_rad_s[g], height_m=departure.height_m[g],
-        vertical_velocity_m_s=departure.vertical_velocity_m_s[g], time_s=departure.time_s[g],
-        outcome=departure.outcome[g], model=departure.model, dt_s=departure.dt_s)
+@KERNEL
+def replay_plate_copies(gone, n, copies, cos, sin, position, free_end, velocity, spin, height, vz, radius, plates,
+                        margin, zone, inv_kappa, max_bounces, gravity, disc_height, out_row, out_position, out_height,
+                        out_velocity, out_spin):
+    """`plate_replays`' work: copy k of granule j = gone[i] is row k N + j of cos and sin;
+    its straight path is the granule's (position to free_end) turned. Fills the first M
+    rows of the outputs, copy-major, and returns M. Compiled and GIL-free."""
+    kept = 0
+    for k in range(1, copies):
+        for i in range(gone.size):
+            j = gone[i]
+            row = k * n + j
+            c, s = cos[row], sin[row]
+            if not path_near_plates(c * position[j, 0] - s * position[j, 1], s * position[j, 0] + c * position[j, 1],
+                                    c * free_end[j, 0] - s * free_end[j, 1], s * free_end[j, 0] + c * free_end[j, 1],
+                                    radius[j], plates, margin):
+                continue
+            px, py, vx, vy, w, elapsed, bounces, _ = pass_plates(
+                c * position[j, 0] - s * position[j, 1], s * position[j, 0] + c * position[j, 1],
+                c * velocity[j, 0] - s * velocity[j, 1], s * velocity[j, 0] + c * velocity[j, 1], spin[j], radius[j],
+                plates, zone, inv_kappa, max_bounces)
+            if bounces == 0:
+                continue
+            out_row[kept] = row
+            out_position[kept, 0], out_position[kept, 1] = px, py
+            out_height[kept] = max(disc_height + (height[j] + vz[j] * elapsed - 0.5 * gravity * elapsed**2), 0.0)
+            out_velocity[kept, 0], out_velocity[kept, 1], out_velocity[kept, 2] = vx, vy, vz[j] - gravity * elapsed
+            out_spin[kept] = w
+            kept += 1
+    return kept
 
 
-def plate_copied_sample(throw: Throw, copies: PlateCopies, landing_m: np.ndarray, free_landing_m: np.ndarray,
-                        replayed_x_m: np.ndarray, count: int) -> TraySample:
-    """The tray sample of one disc's `count` copies among plates (disc axis at the origin),
-    each copy 1/count of its granule's mass.
-
-    A copy whose straight path clears every plate meets none in any deflector stage: it
-    lands where its granule's plate-free throw lands (`free_landing_m`), turned. Copy 0
-    near a plate is the granule itself, landing where the model's own plate stage put it
-    (`landing_m`). The other copies near a plate had their plate stage run again
-    (`replayed_x_m`, across the track, in the order of `copies.replayed`)."""
+def plate_copied_sample(throw: Throw, turn: Turn, landing_m: np.ndarray, free_landing_m: np.ndarray,
+                        replays: PlateReplays, replayed_x_m: np.ndarray) -> TraySample:
+    """The tray sample of one disc's copies among plates (disc axis at the origin), every
+    departed copy in copy-major order, each 1/copies of its granule's mass: copy 0 is the
+    granule itself, landing where the model's own plate stage put it (`landing_m`); a copy
+    the plates turned lands where it flew (`replayed_x_m`, across the track, in the order
+    of `replays`); every other copy meets no plate and lands where its granule's
+    plate-free throw lands (`free_landing_m`), turned."""
     g = throw.granules
-    clear, own = copies.clears, ~copies.clears & (copies.copy == 0)
-    at = free_landing_m[copies.granule[clear]]
-    x = np.concatenate([copies.cos[clear] * at[:, 0] - copies.sin[clear] * at[:, 1],
-                        landing_m[copies.granule[own], 0], replayed_x_m])
-    order = np.concatenate([copies.granule[clear], copies.granule[own], copies.granule[copies.replayed]])
-    return TraySample(x, g.mass_kg[order] / count, g.replicate[order])
+    gone = np.flatnonzero(throw.launch.departed)
+    size = turn.copies * gone.size
+    x, mass, replicate = np.empty(size), np.empty(size), np.empty(size, dtype=g.replicate.dtype)
+    fill_plate_copies(gone, g.count, turn.copies, turn.cos, turn.sin, landing_m, free_landing_m, replays.row,
+                      replayed_x_m, g.mass_kg, g.replicate, x, mass, replicate)
+    return TraySample(x, mass, replicate)
+
+
+@KERNEL
+def fill_plate_copies(gone, n, copies, cos, sin, landing, free_landing, replay_row, replay_x, mass, replicate, out_x,
+                      out_mass, out_replicate):
+    """`plate_copied_sample`'s work, one pass over the departed copies. Compiled and GIL-free."""
+    at = 0
+    next_replay = 0
+    for k in range(copies):
+        for i in range(gone.size):
+            j = gone[i]
+            row = k * n + j
+            if k == 0:
+                out_x[at] = landing[j, 0]
+            elif next_replay < replay_row.size and replay_row[next_replay] == row:
+                out_x[at] = replay_x[next_replay]
+                next_replay += 1
+            else:
+                out_x[at] = cos[row] * free_landing[j, 0] - sin[row] * free_landing[j, 1]
+            out_mass[at] = mass[j] / copies
+            out_replicate[at] = replicate[j]
+            at += 1

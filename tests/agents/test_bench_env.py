@@ -8,9 +8,9 @@ from spreadgym.agents.commands.bench import env_steps_per_second, vector_env_ste
 
 def test_env_section_runs_every_env_and_scene():
     rows = env_steps_per_second(steps=2, repeats=1)
+    scenes = ("paper", "field", "twin-field", "paper-deflectors")
     assert [(r["env"].split(":")[1], r["scene"]) for r in rows] == [
-        ("SpinnerDesign-v0", "paper"), ("SpinnerDesign-v0", "field"), ("SpinnerDesign-v0", "twin-field"),
-        ("SpreaderTuning-v0", "paper"), ("SpreaderTuning-v0", "field"), ("SpreaderTuning-v0", "twin-field")]
+        (env, scene) for env in ("SpinnerDesign-v0", "SpreaderTuning-v0") for scene in scenes]
     assert all(r["model"] == "compiled" and r["steps_per_s"] > 0 and math.isfinite(r["ms_per_step"]) for r in rows)
 
 

@@ -383,7 +383,7 @@ def test_yaml_defaults_are_the_documented_ones():
 
 
 def test_the_default_granule_count_is_the_scenes_own():
-    for scene, granules in (("paper", 2048), ("paper-deflectors", 4096)):
+    for scene, granules in (("paper", 2048), ("paper-deflectors", 2048), ("field", 2048)):
         env = gym.make("spreadgym:SpinnerDesign-v0", scene=scene)
         assert env.unwrapped.task.base_scene.sim.granules == granules
 

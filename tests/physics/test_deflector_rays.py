@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from spreadgym.config.scene import Deflector
-from spreadgym.physics.analytic.deflector_rays import capsule_hit, deflect
+from spreadgym.physics.analytic.deflector_rays import deflect
+from spreadgym.physics.compiled.plates import capsule_entry, pack_plates
 from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.departure import DEPARTED, RETAINED_STUCK, Departure
 from spreadgym.physics.geometry import zone_radius_m
@@ -122,7 +123,12 @@ def test_capsule_hit_against_brute_force():
     V = rng.normal(size=(n, 2))
     a, b = np.array([-0.1, 0.05]), np.array([0.2, -0.1])
     reach = np.full(n, 0.03)
-    t, normal = capsule_hit(P, V, a, b, reach)
+    plate = Deflector(x_m=0.05, y_m=-0.025, angle_deg=math.degrees(math.atan2(-0.15, 0.3)),
+                      length_m=math.hypot(0.3, 0.15), material="steel")
+    table = pack_plates([plate], [0.0], [1.0])
+    a, b = table[0, :2], table[0, 2:4]  # (-0.1, 0.05) and (0.2, -0.1) to rounding
+    hits = [capsule_entry(*P[i], *V[i], table, 0, reach[i]) for i in range(n)]
+    t, normal = np.array([h[0] for h in hits]), np.array([h[1:] for h in hits])
     ts = np.linspace(0, 2, 20001)
     for i in range(n):
         path = P[i] + ts[:, None] * V[i]

@@ -37,3 +37,13 @@ def test_analytic_and_pymunk_agree_on_departure_speed_within_half_a_percent(over
     pymunk = run_scene(scene, model="pymunk", ci=False).metrics.departure
     assert analytic["speed_mean_m_s"] == pytest.approx(pymunk["speed_mean_m_s"], rel=0.005)
     assert analytic["angle_mean_deg"] == pytest.approx(pymunk["angle_mean_deg"], abs=0.5)
+
+
+def test_auto_takes_the_compiled_plates_where_plates_stand_apart_and_the_full_model_where_they_nearly_touch():
+    model, reason = choose_model(load_scene("paper-deflectors"))
+    assert model == "compiled" and "plates bounce granules event by event" in reason
+    assert "plates" not in choose_model(load_scene("paper"))[1]
+    touching = [{"x_m": 0.3, "y_m": 0.0, "angle_deg": 90.0, "length_m": 0.2, "material": "steel"},
+                {"x_m": 0.315, "y_m": 0.0, "angle_deg": 90.0, "length_m": 0.2, "material": "steel"}]
+    model, reason = choose_model(load_scene("paper", {"deflectors": touching}))
+    assert model == "pymunk" and "deflectors 0 and 1 12 mm apart (under 20 mm" in reason

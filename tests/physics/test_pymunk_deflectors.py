@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from spreadgym.config.scene import Deflector
+from spreadgym.physics.compiled.plates import segment_distance
 from spreadgym.physics.contacts import PlateContact
 from spreadgym.physics.departure import DEPARTED, Departure
-from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk, segment_distance
+from spreadgym.physics.stepped.pymunk_deflectors import deflect_pymunk
 
 
 def one_granule(position, velocity):
@@ -64,4 +65,5 @@ def test_segment_distance_matches_brute_force():
     s = np.linspace(0, 1, 401)
     brute = [np.min(np.hypot(*((q0[None] + s[:, None] * (q1 - q0))[:, None] - (a + s[:, None] * (b - a))[None]).T))
              for q0, q1 in zip(p0, p1)]
-    np.testing.assert_allclose(segment_distance(p0, p1, a, b), brute, atol=6e-3)
+    got = [segment_distance(*q0, *q1, *a, *b) for q0, q1 in zip(p0, p1)]
+    np.testing.assert_allclose(got, brute, atol=6e-3)

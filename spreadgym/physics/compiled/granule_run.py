@@ -149,9 +149,16 @@ def _drag_sign(x, xd, frame, resting, P):
 
 @KERNEL
 def run_one(cx, cy, radius, z, vz, P, V, out, track):
+    """`follow` with its scratch array allocated here (on the CPU)."""
+    return follow(cx, cy, radius, z, vz, P, V, out, track, np.empty((2, face_motion.EVENTS)))
+
+
+@KERNEL
+def follow(cx, cy, radius, z, vz, P, V, out, track, work):
     """Follow one granule (start at rest in the machine frame at (cx, cy), base height z,
     vertical speed vz); write its final state into `out`, its path into `track`
-    (rows of positions in the disc frame and times; NaN-padded). Returns its outcome."""
+    (rows of positions in the disc frame and times; NaN-padded). Returns its outcome.
+    `work` (2, face_motion.EVENTS): scratch space (a GPU thread's local array there)."""
     omega, g, top = P[OMEGA], P[GRAVITY], P[VANE_TOP]
     reach = radius + P[HALF_THICKNESS]
     vx, vy, s = omega * cy, -omega * cx, 0.0
@@ -164,7 +171,6 @@ def run_one(cx, cy, radius, z, vz, P, V, out, track):
     frame = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     x, xd, length = 0.0, 0.0, 0.0
     outcome = RETAINED_TIMEOUT
-    work = np.empty((2, face_motion.EVENTS))
     n_track = track.shape[0]
     stalled, loop = 0, 0
     stall_time = STALL_FRACTION * P[STEP]

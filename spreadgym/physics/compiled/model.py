@@ -14,6 +14,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from spreadgym import device
 from spreadgym.config.scene import Scene
 from spreadgym.physics.compiled import granule_run
 from spreadgym.physics.compiled.layout import OMEGA_STEP, STEP, V_SIZE, pack_parameters, pack_vanes
@@ -65,8 +66,9 @@ def kernel_inputs(scene: Scene, granules: GranuleBatch, contacts: Contacts) -> K
 
 def run_kernels(batch: list[KernelInputs], track_count: int = 0) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """(out (N, OUT_SIZE), outcome (N,), tracks (k, MAX_TRACK_POINTS, 3)) of each inputs'
-    granules, all designs' granules in one parallel kernel run; tracks of the first
-    design's first `track_count` granules."""
+    granules, all designs' granules in one parallel kernel run, on the CPU's threads or,
+    where spreadgym.device says "cuda", in one GPU launch; tracks (pictures, always on the
+    CPU) of the first design's first `track_count` granules."""
     counts = np.array([inputs.radius.shape[0] for inputs in batch])
     vanes = np.zeros((len(batch), max(inputs.vanes.shape[0] for inputs in batch), V_SIZE))
     for d, inputs in enumerate(batch):
@@ -75,13 +77,18 @@ def run_kernels(batch: list[KernelInputs], track_count: int = 0) -> list[tuple[n
     out = np.zeros((n, granule_run.OUT_SIZE))
     outcome = np.zeros(n, dtype=np.int8)
     tracks = np.full((min(track_count, counts[0]), MAX_TRACK_POINTS, 3), np.nan)
-    with numba_threads():
-        granule_run.run_all(np.concatenate([inputs.start for inputs in batch]),
-                            np.concatenate([inputs.radius for inputs in batch]),
-                            np.repeat(np.arange(len(batch)), counts),
-                            np.array([inputs.z0 for inputs in batch]), np.array([inputs.vz0 for inputs in batch]),
-                            np.stack([inputs.params for inputs in batch]), vanes,
-                            np.array([inputs.vanes.shape[0] for inputs in batch]), out, outcome, tracks)
+    arrays = (np.concatenate([inputs.start for inputs in batch]), np.concatenate([inputs.radius for inputs in batch]),
+              np.repeat(np.arange(len(batch)), counts),
+              np.array([inputs.z0 for inputs in batch]), np.array([inputs.vz0 for inputs in batch]),
+              np.stack([inputs.params for inputs in batch]), vanes,
+              np.array([inputs.vanes.shape[0] for inputs in batch]))
+    if device.current() == "cuda" and not tracks.shape[0]:
+        from spreadgym.physics.compiled import cuda_spinner  # numba's CUDA target: only when asked for
+
+        cuda_spinner.run_all(*arrays, out, outcome)
+    else:
+        with numba_threads():
+            granule_run.run_all(*arrays, out, outcome, tracks)
     edges = np.cumsum(counts)[:-1]
     no_tracks = tracks[:0]
     return [(o, c, tracks if d == 0 else no_tracks)

@@ -1,0 +1,81 @@
+"""The CUDA backend (spreadgym.device, physics.compiled.cuda_spinner; the envs' `device` in
+tests/envs/test_env_device.py) under numba's CUDA simulator (the `cuda_simulator` fixture):
+the kernel's granule index, design index, copies in and out, against the CPU kernel on
+small batches; and the one-line errors where no GPU is found."""
+
+import pytest
+
+from spreadgym import device
+from spreadgym.cli.main import main
+from spreadgym.errors import ConfigError
+
+SIMULATED = """
+import json, numpy as np
+from spreadgym import device, threads
+from spreadgym.config.scene import load_scene
+from spreadgym.physics.compiled import cuda_spinner
+from spreadgym.spread.batch import run_batch
+
+launches = []
+launch = cuda_spinner.run_all
+cuda_spinner.run_all = lambda *a: (launches.append(a[0].shape[0]), launch(*a))
+scenes = [load_scene(name, {"sim.granules": 24, "sim.seed": seed, "sim.replicates": 2})
+          for seed, name in enumerate(["paper", "twin-field", "paper-deflectors", "field"])]
+threads.set_threads(2)
+cpu = run_batch(scenes)
+with device.using("cuda"):
+    gpu = run_batch(scenes)
+rows = []
+for a, b in zip(cpu, gpu):
+    mass = np.abs(a.trays.mass_kg - b.trays.mass_kg).max() / a.trays.mass_kg.max()
+    rows.append({"outcomes": [a.metrics.outcomes, b.metrics.outcomes], "tray_rel": float(mass),
+                 "cv": [a.metrics.cv_percent_at_target, b.metrics.cv_percent_at_target],
+                 "departures_equal": bool(np.array_equal(a.departure.position_m, b.departure.position_m))})
+print(json.dumps({"rows": rows, "launches": launches}))
+"""
+
+
+def test_the_cuda_kernel_gives_the_cpu_results_in_one_launch_per_batch(cuda_simulator):
+    """Outcome counts equal, tray masses within 1e-12 relative (the simulator runs the CPU's
+    scalar code, so here they are equal to the bit; a real GPU may differ in the last bits
+    where it fuses multiply-adds); one launch for the whole batch at two threads."""
+    found = cuda_simulator(SIMULATED)
+    for row in found["rows"]:
+        assert row["outcomes"][0] == row["outcomes"][1]
+        assert row["tray_rel"] <= 1e-12
+        assert row["departures_equal"]
+    assert found["launches"] == [24 * 4]  # every scene's granules (twin-field's second disc is its first mirrored)
+
+
+@pytest.mark.skipif(device.cuda_available(), reason="a CUDA GPU is present: the no-GPU errors do not apply")
+def test_cuda_without_a_gpu_is_a_one_line_error(capsys, monkeypatch):
+    monkeypatch.delenv(device.ENV_VAR, raising=False)
+    assert main(["simulate", "--device", "cuda", "--set", "sim.granules=16"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--device" in err and "no CUDA GPU" in err
+    monkeypatch.setenv(device.ENV_VAR, "cuda")
+    with pytest.raises(ConfigError, match=device.ENV_VAR):
+        device.current()
+
+
+def test_the_device_names_and_their_order(monkeypatch):
+    monkeypatch.delenv(device.ENV_VAR, raising=False)
+    assert device.current() == "cpu"
+    monkeypatch.setenv(device.ENV_VAR, "gpu")
+    with pytest.raises(ConfigError, match="unknown device 'gpu'; allowed: cpu, cuda"):
+        device.current()
+    monkeypatch.setenv(device.ENV_VAR, "cpu")
+    device.set_device("cpu")
+    try:
+        with device.using(None):
+            assert device.current() == "cpu"
+    finally:
+        device.set_device(None)
+
+
+def test_compare_drives_one_gpu_from_one_process(capsys, monkeypatch):
+    """Workers and devices never multiply: with a GPU (faked here), --device cuda with two
+    worker processes is refused."""
+    monkeypatch.setattr(device, "cuda_available", lambda: True)
+    code = main(["compare", "--device", "cuda", "--workers", "2", "--budget", "2", "--methods", "random"])
+    assert code == 2 and "--workers 1" in capsys.readouterr().err
