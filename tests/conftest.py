@@ -105,3 +105,19 @@ def listening_sockets():
     """The listening sockets of a process tree: `listening_sockets(pid)` -> [(address, port, name)]."""
     return _listening_sockets
 
+
+
+@pytest.fixture
+def copied_fertilizer(tmp_path):
+    """A user's materials file whose one fertilizer, "my-compound", is the library's
+    compound-10-16-10 value for value (the YAML anchors resolved, provenance left out):
+    `(path, name)`. What runs it must match what runs the compound."""
+    import yaml
+
+    from spreadgym.config.resources import config_dir, read_yaml
+
+    entry = dict(read_yaml(config_dir() / "materials.yaml")["fertilizers"]["compound-10-16-10"])
+    entry.pop("provenance")
+    path = tmp_path / "my-materials.yaml"
+    path.write_text(yaml.safe_dump({"fertilizers": {"my-compound": entry}}))
+    return path, "my-compound"

@@ -136,10 +136,10 @@ def advise(scene: Scene, test: TrayTest, width_m: float, fit: Sequence[str] = DE
     say(f"fitting {', '.join(space.keys)} to {test.count} trays")
     fitted = fit_tray_test(scene, space, test, model=model, granules=fit_granules, seed=seed)
     at_width = scene_with(fitted.fitted_scene, {"pattern.target_swath_m": width_m})
-    spec = ChartSpec(at_width.model_dump(mode="json"), (at_width.fertilizer,), (width_m,),
+    spec = ChartSpec(at_width.model_dump(mode="json"), (at_width.fertilizer_name,), (width_m,),
                      at_width.pattern.driving, int(budget), int(granules), seed, verify_model="compiled",
                      variability=check_variability(None), steady_tolerance_pp=0.0, tie_preference="nearest")
-    cell = Cell(at_width.fertilizer, width_m)
+    cell = Cell(at_width.fertilizer_name, width_m)  # an inline fertilizer by its name: spec.library() holds it
     scorer_seq, cma_seq, *_ = cell_seed(seed, cell).spawn(5)
     scorer = Scorer(spec, cell, scorer_seq)
     tested_unit = scorer.space.scene_unit(scorer.scene)
@@ -237,7 +237,7 @@ def advice_payload(advice: Advice, fit_payload: dict) -> dict:
         "cv_before_standard_error_percent": advice.cv_before_se,
         "cv_after_standard_error_percent": advice.cv_after_se,
         "cv_p90_before_percent": advice.p90_before, "cv_p90_after_percent": advice.p90_after,
-        "scene": scene.name, "fertilizer": scene.fertilizer, "width_m": advice.width_m,
+        "scene": scene.name, "fertilizer": scene.fertilizer_name, "width_m": advice.width_m,
         "driving": scene.pattern.driving, "tested": advice.tested, "advised": advice.advised,
         "band": "the fitted model at the estimate and at both ends of every fitted key's 90 % profile interval",
         "search": advice.search, "fit": fit_payload, "wall_s": advice.wall_s,

@@ -54,7 +54,6 @@ from spreadgym.agents.chart import variability as var
 from spreadgym.agents.chart.spec import Cell, ChartSpec, cell_seed
 from spreadgym.agents.chart.sweep import SLICE_POINTS, SLICE_REFINE, speed_steps
 from spreadgym.agents.evaluation import WORST_CV_PERCENT
-from spreadgym.config.materials import load_library
 from spreadgym.config.scene import scene_with
 from spreadgym.physics.selection import choose_model
 from spreadgym.spread.batch import run_batch
@@ -113,7 +112,7 @@ class Scorer:
                    seeds: Optional[list] = None) -> list[tuple]:
         """(cost, CV %) of each of `units`: robust, the quantile over `cell_draws`; nominal, one run at its seed
         in `seeds`. All runs in one `run_batch` per model (the same bits as one call per unit or per run)."""
-        spec, library = self.spec, load_library()
+        spec, library = self.spec, self.spec.library()
         if spec.objective != "nominal":
             library = var.draw_library(library, self.cell.fertilizer, cell_draws)
         runs = []  # (model, scenes) of each unit
@@ -277,7 +276,7 @@ def verify_p90(spec: ChartSpec, cell: Cell, scene, settings: dict, seq: np.rando
     quantile and its bootstrap SE."""
     draws_seq, bootstrap_seq = var.child(seq, 0), var.child(seq, 1)
     cell_draws = var.draws(spec.variability, spec.variability["verify_draws"], draws_seq)
-    library = var.draw_library(load_library(), cell.fertilizer, cell_draws)
+    library = var.draw_library(spec.library(), cell.fertilizer, cell_draws)
     runs = spec.variability["verify_runs_per_draw"]  # n runs pooled are one run of n times the granules
     pooled = {"sim.granules": runs * scene.sim.granules, "sim.replicates": runs * scene.sim.replicates}
     scenes = [scene_with(scene, var.perturbed(scene, settings, d, library) | pooled) for d in cell_draws]
@@ -329,7 +328,7 @@ def verified_record(spec: ChartSpec, cell: Cell, x: np.ndarray, cv_search: Optio
     space = spec.space(scene)
     settings = space.overrides(x)
     verify_scene = scene_with(scene, settings | {"sim.seed": int(verify_seq.generate_state(1)[0])})
-    pooled = pool_runs(verify_scene, spec.verify_runs, model=spec.verify_model, library=load_library())
+    pooled = pool_runs(verify_scene, spec.verify_runs, model=spec.verify_model, library=spec.library())
     reference = reference_from(verify_scene, pooled)
     cv, cv_se = reference.at_target.cv_percent, reference.at_target.standard_error_percent
     p90 = verify_p90(spec, cell, scene, settings, p90_seq)

@@ -128,6 +128,11 @@ class ChartSpec:
     def base_scene(self) -> Scene:
         return scene_from_dict(self.scene)
 
+    def library(self) -> MaterialLibrary:
+        """The material library the cells run with: the process's (a user's materials file included) and
+        the base scene's inline fertilizer under its name."""
+        return load_library().with_inline(self.base_scene())
+
     def cell_scene(self, cell: Cell) -> Scene:
         """The base scene for one cell: its fertilizer, width, driving and granule count."""
         return scene_with(self.base_scene(), {"fertilizer": cell.fertilizer, "pattern.target_swath_m": cell.width_m,

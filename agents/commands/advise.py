@@ -25,6 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="W", help="the working width wanted, m (a multiple of the tray width)")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                         help="the settings the test was made at, as scene keys (e.g. spinner.rpm=720)")
+    arguments.add_materials_flag(parser)
     parser.add_argument("--fit", dest="fit", action="append", metavar="KEY=LO:HI[,KEY=LO:HI ...]",
                         help="the keys to fit with their ranges (default: " + ",".join(DEFAULT_FIT) + ")")
     parser.add_argument("--budget", type=arguments.integer(4, MAX_BUDGET), default=ADVICE_BUDGET, metavar="N",
@@ -59,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     import yaml
 
     from spreadgym.agents.advise.run import DEFAULT_FIT, advice_payload, advise, check_width
+    from spreadgym.config.materials import user_materials
     from spreadgym.config.overrides import parse_assignments
     from spreadgym.config.scene import load_scene, scene_with
     from spreadgym.fit.outputs import payload, predict, scene_yaml
@@ -70,17 +72,19 @@ def run(args: argparse.Namespace) -> int:
     if args.threads is not None:
         set_threads(args.threads)
     overrides = parse_assignments(args.overrides)
-    scene = load_scene(args.scene, overrides)
+    scene = load_scene(args.scene, overrides, args.materials)
     check_width(args.width, scene)
     out = None
     if args.out is not None:
-        out = OutFolder(args.out, "advise", files=ADVICE_FILES, inputs=named_files(args.trays, args.scene),
-                        force=args.force, replaces_own=False)
+        out = OutFolder(args.out, "advise", files=ADVICE_FILES,
+                        inputs=named_files(args.trays, args.scene, args.materials), force=args.force,
+                        replaces_own=False)
         out.check()
     test = read_trays(args.trays, scene.pattern.tray_width_m)
-    advice = advise(scene, test, args.width, fit=args.fit or DEFAULT_FIT, budget=args.budget, granules=args.granules,
-                    fit_granules=args.fit_granules, seed=args.seed, fixed=overrides,
-                    progress=lambda text: print(f"{text} ...", file=sys.stderr))
+    with user_materials(args.materials):  # the search's batches of the fertilizer are drawn from the library
+        advice = advise(scene, test, args.width, fit=args.fit or DEFAULT_FIT, budget=args.budget,
+                        granules=args.granules, fit_granules=args.fit_granules, seed=args.seed, fixed=overrides,
+                        progress=lambda text: print(f"{text} ...", file=sys.stderr))
     data = advice_payload(advice, payload(advice.fit, predict(advice.fit), None))
     if out is not None:
         advised = scene_with(advice.fit.fitted_scene, {**advice.advised, "pattern.target_swath_m": args.width})

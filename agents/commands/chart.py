@@ -70,6 +70,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the lowest disc speed, then the smallest change from the neighbours; a wider tie set "
                              f"removes reversals at a price in CV (docs/charts.md; default {STEADY_TOLERANCE_PP:g}; "
                              "0: the two-standard-error rule)")
+    arguments.add_materials_flag(parser)
     arguments.force_flag(parser)
     parser.add_argument("--json", action="store_true", help="print chart.json on stdout")
 
@@ -77,12 +78,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from spreadgym.agents.chart import chart
     from spreadgym.agents.chart.outputs import markdown
+    from spreadgym.config.materials import user_materials
+    from spreadgym.errors import ConfigError
     from spreadgym.report import print_json
 
-    result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving, budget=args.budget,
-                   granules=args.granules, seed=args.seed, workers=args.workers, address=args.address,
-                   method=args.method, objective=args.objective, policy=args.policy, variability=args.variability,
-                   verify_model=args.verify_model, steady_tolerance_pp=args.steady_tolerance_pp, force=args.force)
+    if args.materials is not None and args.address is not None:  # a cluster's workers read their own disks
+        raise ConfigError("--materials", "not with --address: a cluster's workers cannot read this machine's file; "
+                          "put it on every node and set SPREADGYM_MATERIALS there")
+    with user_materials(args.materials):  # the cells' workers (the embedded Ray's) inherit it
+        result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving,
+                       budget=args.budget, granules=args.granules, seed=args.seed, workers=args.workers,
+                       address=args.address, method=args.method, objective=args.objective, policy=args.policy,
+                       variability=args.variability, verify_model=args.verify_model,
+                       steady_tolerance_pp=args.steady_tolerance_pp, force=args.force)
     for key, problem in result.replaced.items():
         print(f"cells/{key}.json was not its cell's record ({problem}): computed again", file=sys.stderr)
     if args.json:

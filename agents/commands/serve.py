@@ -15,10 +15,12 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import json
+import os
 import socket
 from pathlib import Path
 
 from spreadgym.cli import arguments
+from spreadgym.config.materials import MATERIALS_ENV
 from spreadgym.errors import SpreadgymError
 
 DEFAULT_HOST = "127.0.0.1"  # this machine only, unless --host and --allow-remote say otherwise
@@ -37,6 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "can run simulations and fits and start chart jobs)")
     parser.add_argument("--port", type=arguments.integer(1, 65535), default=DEFAULT_PORT,
                         help=f"port (default {DEFAULT_PORT})")
+    arguments.add_materials_flag(parser)
     parser.add_argument("--charts", type=Path, default=Path("out/charts"), metavar="DIR",
                         help="chart folders the chart page shows and where its jobs write (default out/charts)")
     parser.add_argument("--time-limit", type=arguments.real(1.0, 86400.0), default=TIME_LIMIT_S, metavar="S",
@@ -81,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     from spreadgym.agents.web.app import create_app
 
     sock = listening_socket(args.host, args.port, args.allow_remote)
+    if args.materials is not None:  # the whole server's library, its workers' and chart jobs' too (they inherit it)
+        os.environ[MATERIALS_ENV] = str(args.materials.resolve())
     if not is_loopback(args.host):
         print(exposure(args.host, args.port, args.charts))
     print(f"spreadgym serve: http://{args.host}:{args.port}/ (charts under {args.charts}; Ctrl-C stops)", flush=True)

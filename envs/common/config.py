@@ -228,6 +228,10 @@ class DesignConfig(StrictModel):
     device: Optional[Literal["cpu", "cuda"]] = Field(
         default=None, description="where the compiled spinner runs: cpu, or cuda (a GPU: `pip install "
                                   "spreadgym[cuda]`); null: SPREADGYM_DEVICE, else cpu (spreadgym.device)")
+    materials: Optional[str] = Field(
+        default=None, description="a materials file (configs/materials.yaml's layout) merged over the library, "
+                                  "as `--materials`: its fertilizers can be named in context.fertilizers; null: "
+                                  "SPREADGYM_MATERIALS's file, else the shipped library")
     granules: Optional[Integer] = Field(
         default=None, ge=1, le=1_000_000,
         description="granules simulated per step, each at sim.angle_copies release angles; null: the scene's own "

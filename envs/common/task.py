@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import zlib
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
@@ -128,7 +129,7 @@ class Task:
         self.cfg = cfg
         if cfg.device is not None:
             device.checked(cfg.device, "device")  # a GPU asked for where there is none: fail at make
-        self.library = load_library()
+        self.library = self._library(cfg.materials)
         # a job's scene would be rebuilt and re-validated every episode (scenes are immutable);
         # a plain dict, so the task still pickles and deep-copies
         self._jobs: dict[Context, tuple[Scene, dict[str, float]]] = {}
@@ -348,6 +349,17 @@ class Task:
         info = context.as_dict()
         info["fallback_restitution"] = dict(self._job(context)[1])  # a copy: the kept one stays
         return info
+
+    @staticmethod
+    def _library(materials: Optional[str]) -> MaterialLibrary:
+        """The shipped library, with the user's `materials` file merged over it (the key's one-line error)."""
+        if materials is None:
+            return load_library()
+        try:
+            return load_library(extra=Path(materials))
+        except (ConfigError, MaterialError) as exc:
+            flag = isinstance(exc, ConfigError) and exc.key == "--materials"
+            raise ConfigError("materials", exc.message if flag else str(exc)) from None
 
     # -- simulation ------------------------------------------------------------------
     def settings_scene(self, context_scene: Scene, settings: Settings, seed: int,

@@ -15,10 +15,12 @@ invented number. A shipped fertilizer states the source of every number it holds
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import os
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import Any, Iterator, Mapping, Optional
 
 from pydantic import Field, model_validator
 
@@ -189,6 +191,14 @@ class MaterialLibrary:
             return Fertilizer.from_spec(chosen.name or INLINE_NAME, chosen)
         return self.fertilizer(chosen)
 
+    def with_inline(self, scene: Any) -> "MaterialLibrary":
+        """This library with `scene`'s inline fertilizer under its name (over a library entry of that
+        name), for code that names fertilizers (charts, the variability model's copies); itself otherwise."""
+        if not isinstance(scene.fertilizer, FertilizerSpec):
+            return self
+        inline = self.fertilizer_of(scene)
+        return replace(self, fertilizers={**self.fertilizers, inline.name: inline})
+
     def fertilizer_value(self, name: str) -> Any:
         """What a scene's `fertilizer:` should hold to run `name`: the name of a shipped entry,
         or, for one a user's materials file added or changed, the merged entry inline (so
@@ -260,13 +270,45 @@ def _library(raws: list[tuple[str, dict]]) -> MaterialLibrary:
     return MaterialLibrary(fertilizers=fertilizers, surfaces=surfaces, sources=sources, user_entries=user)
 
 
-@lru_cache(maxsize=8)
+MATERIALS_ENV = "SPREADGYM_MATERIALS"
+"""A user's materials file merged over the shipped library wherever no other is named: set by
+`serve --materials` and `chart --materials` for their worker processes (which inherit it),
+or by a user for every command."""
+
+
 def load_library(path: Optional[Path] = None, extra: Optional[Path] = None) -> MaterialLibrary:
     """Read the material library (the shipped one by default), with a user's materials
-    file `extra` merged over it."""
+    file `extra` merged over it; the shipped library with neither named takes
+    SPREADGYM_MATERIALS's file, if set, as `extra`."""
+    flag = "--materials"
+    if path is None and extra is None and os.environ.get(MATERIALS_ENV):
+        extra, flag = Path(os.environ[MATERIALS_ENV]), MATERIALS_ENV
+    return _load_library(path, extra, flag)
+
+
+@contextmanager
+def user_materials(path: Optional[Path]) -> Iterator[None]:
+    """SPREADGYM_MATERIALS set to `path` (resolved) while the block runs, for this process and
+    the processes it starts; nothing changes for None."""
+    if path is None:
+        yield
+        return
+    saved = os.environ.get(MATERIALS_ENV)
+    os.environ[MATERIALS_ENV] = str(Path(path).resolve())
+    try:
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop(MATERIALS_ENV, None)
+        else:
+            os.environ[MATERIALS_ENV] = saved
+
+
+@lru_cache(maxsize=8)
+def _load_library(path: Optional[Path], extra: Optional[Path], flag: str) -> MaterialLibrary:
     raws = [("materials", read_yaml(path or config_dir() / "materials.yaml"))]
     if extra is not None:
-        raws.append((f"--materials {extra}", read_yaml(regular_file(Path(extra), "--materials"))))
+        raws.append((f"{flag} {extra}", read_yaml(regular_file(Path(extra), flag))))
     return _library(raws)
 
 

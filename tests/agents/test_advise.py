@@ -132,3 +132,22 @@ def test_the_api_answers_what_the_command_prints(trays, capsys):
     assert {k: v for k, v in page.items() if k not in drop} == {k: v for k, v in cli.items() if k not in drop}
     assert page["fit"]["parameters"] == cli["fit"]["parameters"]
 
+
+
+def test_advise_materials_advises_a_users_copy_as_the_original(trays, capsys, copied_fertilizer, tmp_path):
+    """advise --materials FILE: a file restating the scene's compound value for value (so the scene carries it
+    inline, and the search's batches are drawn from it) gives the library compound's advice to the bit; a
+    fertilizer only the file knows is advised on."""
+    path, name = copied_fertilizer
+    restated = tmp_path / "restated.yaml"
+    restated.write_text(path.read_text().replace(name, "compound-10-16-10"))
+    argv = ["advise", "--scene", "paper", "--trays", str(trays), "--width", "4", "--fit",
+            "contact.vane_restitution=0.3:0.7", "--json", *CHEAP]
+    runs = []
+    for extra in ([], ["--materials", str(restated)], ["--materials", str(path), "--set", f"fertilizer={name}"]):
+        code, stdout, _ = _run(argv + extra, capsys)
+        assert code == 0
+        runs.append(json.loads(stdout))
+    drop = ("wall_s", "fit", "files")
+    assert {k: v for k, v in runs[1].items() if k not in drop} == {k: v for k, v in runs[0].items() if k not in drop}
+    assert runs[2]["fertilizer"] == name and runs[2]["cv_after_percent"] <= runs[2]["cv_before_percent"]

@@ -4,6 +4,7 @@ resume after an interruption, refusal of a changed chart, and bad input."""
 import csv
 import json
 import math
+import os
 import shutil
 
 import pytest
@@ -282,3 +283,23 @@ def test_the_search_objective_charges_mass_that_missed_the_trays():
     assert objective(metrics(0.95), 24.0)[0] == pytest.approx(6.0 + 5.0)  # 5 % intercepted or retained
     assert objective(metrics(0.95, swath=18.0), 24.0)[0] == pytest.approx(6.0 + 25.0 + 5.0)
     assert objective(metrics(None), 24.0)[0] == pytest.approx(106.0)  # nothing released
+
+
+def test_chart_materials_runs_the_users_fertilizer_and_stays_local(copied_fertilizer, tmp_path, capsys):
+    """chart --materials FILE: the file's fertilizers are chart fertilizers ('all' offers them), run where the
+    cells run (the workers inherit SPREADGYM_MATERIALS); with --address it is refused in one line (a cluster's
+    workers cannot read this machine's file)."""
+    from spreadgym.config.materials import MATERIALS_ENV, user_materials
+
+    path, name = copied_fertilizer
+    with user_materials(path):
+        assert name in make_spec("paper", "all", "3", **SMALL)[0].fertilizers
+        result = run_chart(make_spec("paper", name, "3", **SMALL)[0], tmp_path / "mine", engine="local",
+                           progress=False)
+    assert MATERIALS_ENV not in os.environ
+    (row,) = result.payload["rows"]
+    assert row["fertilizer"] == name and 0 < row["cv_percent"] < 100
+    out = tmp_path / "refused"
+    code = main(BASE + ["--materials", str(path), "--address", "127.0.0.1:6379", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and "--materials: not with --address" in err[-1] and not out.exists()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 
 import pytest
@@ -180,3 +181,21 @@ def test_a_missing_pair_of_a_new_user_fertilizer_is_named(tmp_path):
                     "    size: {d50_m: 0.003, sd_m: 0.001, min_m: 0.002, max_m: 0.005}\n")
     with pytest.raises(ConfigError, match="fertilizers.partial.restitution: missing"):
         load_library(extra=user)
+
+
+def test_spreadgym_materials_is_the_default_users_file(copied_fertilizer, monkeypatch):
+    """SPREADGYM_MATERIALS (what serve --materials and chart --materials set for their workers) is merged over
+    the shipped library wherever no other file is named; user_materials sets it for a block and puts it back."""
+    from spreadgym.config.materials import MATERIALS_ENV, user_materials
+
+    path, name = copied_fertilizer
+    monkeypatch.delenv(MATERIALS_ENV, raising=False)
+    assert name not in load_library().fertilizers
+    with user_materials(path):
+        copy, original = load_library().fertilizer(name), load_library().fertilizer("compound-10-16-10")
+        assert copy.particle_density_kg_m3 == original.particle_density_kg_m3
+        assert copy.pair("friction", "mc") == original.pair("friction", "mc")
+    assert MATERIALS_ENV not in os.environ and name not in load_library().fertilizers
+    monkeypatch.setenv(MATERIALS_ENV, str(path.parent / "missing.yaml"))
+    with pytest.raises(ConfigError, match="SPREADGYM_MATERIALS: .*missing.yaml: file not found"):
+        load_library()

@@ -225,3 +225,27 @@ def test_a_cancelled_chart_job_leaves_the_server_working(client, charts_dir):
     (charts_dir / "job" / "mine.txt").unlink()
     assert client.delete("/api/charts/job").json() == {"removed": "job"}
     assert not (charts_dir / "job").exists() and client.get("/api/chart-jobs").json()["state"] == "idle"
+
+
+def test_serve_materials_offers_and_runs_the_users_fertilizer(copied_fertilizer, monkeypatch, tmp_path):
+    """serve --materials FILE sets SPREADGYM_MATERIALS for the server and its workers: the page offers the
+    file's fertilizers, and a simulation of one is what `simulate --materials FILE --json` prints."""
+    from spreadgym.config.materials import MATERIALS_ENV
+
+    path, name = copied_fertilizer
+    monkeypatch.setenv(MATERIALS_ENV, str(path))
+    sets = {"sim.granules": 256, "fertilizer": name}
+    with TestClient(create_app(tmp_path), base_url=LOCAL) as mine:
+        assert name in mine.post("/api/scene", json={"scene": "paper"}).json()["fertilizers"]
+        response = mine.post("/api/simulate", json={"scene": "paper", "set": sets})
+    assert response.status_code == 200, response.text
+    served = response.json()
+    monkeypatch.delenv(MATERIALS_ENV)
+    argv = [sys.executable, "-m", "spreadgym.cli.main", "simulate", "--scene", "paper", "--json",
+            "--materials", str(path)] + [f"--set={k}={v}" for k, v in sets.items()]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    printed = json.loads(done.stdout)
+    served.pop("wall_s")
+    printed.pop("wall_s")
+    assert served["cv_percent_at_target"] is not None and served == printed

@@ -1,0 +1,37 @@
+"""A user's fertilizer in the envs (the `materials` keyword): a value-for-value copy of a
+library fertilizer, under its own name, steps exactly as the original does."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import data_equivalence
+
+from spreadgym.errors import ConfigError
+
+DESIGN_ID = "spreadgym/SpinnerDesign-v0"
+SMALL = {"granules": 48, "model": "compiled"}
+
+
+def _episode(fertilizer: str, **kwargs):
+    env = gym.make(DESIGN_ID, context={"fertilizers": [fertilizer]}, **SMALL, **kwargs)
+    obs, _ = env.reset(seed=7)
+    step = env.step(np.full(env.action_space.shape, 0.25, dtype=np.float32))
+    env.close()
+    return obs, step[1], step[4]["metrics"]
+
+
+def test_a_copy_of_a_library_fertilizer_steps_as_the_original(copied_fertilizer):
+    path, name = copied_fertilizer
+    obs, reward, metrics = _episode(name, materials=str(path))
+    obs0, reward0, metrics0 = _episode("compound-10-16-10")
+    assert data_equivalence(obs, obs0, exact=True)
+    assert reward == reward0 and metrics == metrics0
+
+
+def test_a_user_fertilizer_without_its_file_and_a_bad_file_are_one_line(copied_fertilizer, tmp_path):
+    _path, name = copied_fertilizer
+    with pytest.raises(ConfigError, match=f"context.fertilizers: unknown fertilizer '{name}'"):
+        gym.make(DESIGN_ID, context={"fertilizers": [name]}, **SMALL)
+    with pytest.raises(ConfigError, match="materials: .*nothing.yaml: file not found") as info:
+        gym.make(DESIGN_ID, materials=str(tmp_path / "nothing.yaml"), **SMALL)
+    assert "\n" not in str(info.value)
