@@ -120,7 +120,7 @@ def test_the_api_answers_what_the_command_prints(trays, capsys):
                             "contact.vane_restitution=0.3:0.7", "--json", *CHEAP], capsys)
     assert code == 0
     cli = json.loads(stdout)
-    with TestClient(create_app()) as client:
+    with TestClient(create_app(), base_url="http://127.0.0.1") as client:  # the Host the app answers
         answer = client.post("/api/advise", json={"scene": "paper", "trays": trays.read_text(), "width": 4,
                                                   "fit": ["contact.vane_restitution=0.3:0.7"], "budget": 24,
                                                   "granules": 256, "fit_granules": 512, "seed": 3})

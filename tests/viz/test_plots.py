@@ -142,9 +142,7 @@ def test_no_pyplot_global_state():
 def test_a_twin_machines_plan_view_draws_its_first_disc_in_its_frame():
     """The plan view of a twin machine is its first disc about that disc's axis: every path on the disc lies on the
     disc, every ray starts at its rim (simulate --plot and the web page alike; the paths were drawn in the machine
-    frame, 0.4 m off the disc drawn at the origin)."""
-    from spreadgym.agents.web.pattern import plot_data
-
+    frame, 0.4 m off the disc drawn at the origin; the page's test is tests/web/test_web_api.py's)."""
     scene = load_scene("twin-field", {"sim.granules": 256, "sim.angle_copies": 4})
     result = run_scene(scene, ci=False, tracks=10)
     radius = scene.spinner.radius_m
@@ -157,10 +155,3 @@ def test_a_twin_machines_plan_view_draws_its_first_disc_in_its_frame():
     rays = [ln.get_xydata() for ln in ax.get_lines() if ln.get_color() == plots.RAY]
     assert rays and all(np.hypot(*path[0]) == pytest.approx(radius, rel=1e-3) for path in rays)
 
-    class Precise:  # what the page's plot_data reads of simulate's pooled estimate
-        def as_result(self):
-            return result
-
-    plan = plot_data(scene, Precise())["plan"]
-    assert plan["tracks"] and all(np.hypot(*np.asarray(path)).max() <= radius * (1 + 1e-3) for path in plan["tracks"])
-    assert all(np.hypot(path[0][0], path[1][0]) == pytest.approx(radius, rel=1e-2) for path in plan["rays"])

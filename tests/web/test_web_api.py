@@ -249,3 +249,25 @@ def test_serve_materials_offers_and_runs_the_users_fertilizer(copied_fertilizer,
     served.pop("wall_s")
     printed.pop("wall_s")
     assert served["cv_percent_at_target"] is not None and served == printed
+
+
+def test_the_pages_plan_view_of_a_twin_machine_is_its_first_disc():
+    """The page's plan view (plot_data) draws a twin machine's first disc about that disc's axis, as
+    simulate --plot does (tests/viz/test_plots.py): every path on the disc, every ray from its rim."""
+    import numpy as np
+
+    from spreadgym.agents.web.pattern import plot_data
+    from spreadgym.config.scene import load_scene
+    from spreadgym.spread.pipeline import run_scene
+
+    scene = load_scene("twin-field", {"sim.granules": 256, "sim.angle_copies": 4})
+    result = run_scene(scene, ci=False, tracks=10)
+    radius = scene.spinner.radius_m
+
+    class Precise:  # what the page's plot_data reads of simulate's pooled estimate
+        def as_result(self):
+            return result
+
+    plan = plot_data(scene, Precise())["plan"]
+    assert plan["tracks"] and all(np.hypot(*np.asarray(path)).max() <= radius * (1 + 1e-3) for path in plan["tracks"])
+    assert all(np.hypot(path[0][0], path[1][0]) == pytest.approx(radius, rel=1e-2) for path in plan["rays"])
