@@ -40,6 +40,7 @@ import numpy as np
 
 from spreadgym.agents.baselines import ACTION_METHODS, SEARCHES, run_baseline, search_job
 from spreadgym.agents.evaluation import EvalContext, Row, evaluation_set, make_env, run_policy, score_action
+from spreadgym.errors import SpreadgymError
 
 EPISODES = 2  # scoring episodes per job and run
 SEARCH_BUDGET = 100  # simulations per job for random search, CMA-ES and TPE (half the compare default: CPU)
@@ -76,8 +77,7 @@ RUNGS = {
     "pitch": Rung("pitch", "spreadgym/SpinnerDesignPitch-v1", 3, ("random-action", "cmaes", "ppo")),
     "twin": Rung("twin", "spreadgym/SpinnerDesignTwin-v1", 3, ("random-action", "cmaes", "ppo")),
     "wind": Rung("wind", "spreadgym/SpinnerDesignWind-v1", 3, ("random-action", "cmaes", "ppo")),
-    "plates": Rung("plates", "spreadgym/SpinnerDesignPlates-v1", 3, ("random-action", "cmaes", "ppo"),
-                   pending="a plate step costs seconds until the plates are compiled (docs/benchmark.md)"),
+    "plates": Rung("plates", "spreadgym/SpinnerDesignPlates-v1", 3, ("random-action", "cmaes", "ppo")),
     "robust": Rung("robust", "spreadgym/SpinnerDesignRobust-v1", 3, ("random-action", "cmaes", "ppo", "ppo-exact")),
 }
 TRAINED = ("ppo", "sac")
@@ -256,14 +256,19 @@ def score_matrix(runs: Sequence[dict], references: dict, key: str = "normalised"
                 values = [r["reward"] for r in rows]
             else:
                 values = [normalise(r["reward"], ref["random_reward"], ref["best_reward"]) for r in rows]
-            out[i, j] = float(np.mean(values)) if values else np.nan
+            if not values:
+                raise SpreadgymError(f"benchmark: run {i} has no episode on the job {label}")
+            out[i, j] = float(np.mean(values))
     return out
 
 
 def normalise(reward: float, random_reward: float, best_reward: float) -> float:
-    """0 at the random action's mean reward, 1 at the best known setting's."""
+    """0 at the random action's mean reward, 1 at the best known setting's (which must be above it)."""
     span = best_reward - random_reward
-    return (reward - random_reward) / span if span > 0 else float("nan")
+    if not span > 0:
+        raise SpreadgymError(f"benchmark references: the best known reward {best_reward:.6g} is not above the random "
+                             f"action's {random_reward:.6g}; nothing to normalise against")
+    return (reward - random_reward) / span
 
 
 def aggregate(score_dict: dict[str, np.ndarray], reps: int = BOOTSTRAP_REPS, seed: int = 0) -> dict:
@@ -461,8 +466,6 @@ def benchmark_rows(out: Path, docs: Path, progress: Callable[[str], None] = prin
     when every rung that runs is complete; otherwise a SpreadgymError lists what is missing."""
     from spreadgym.agents.evaluation import canonical_env_id
     from spreadgym.config.resources import config_dir
-    from spreadgym.errors import SpreadgymError
-
     if run:
         for rung in RUNGS.values():
             run_rung(out, rung, progress=progress)

@@ -28,6 +28,7 @@ from typing import Callable, Optional
 import numpy as np
 import yaml
 
+from spreadgym.config.base import first_line
 from spreadgym.errors import SpreadgymError
 
 DEFAULT_ENV = "spreadgym/SpinnerDesign-v1"
@@ -109,8 +110,9 @@ def _callable_policy(module: str, name: str, text: str, env_id: Optional[str]) -
             spec.loader.exec_module(loaded)
         else:
             loaded = importlib.import_module(module)
-    except (ImportError, FileNotFoundError) as exc:
-        raise SpreadgymError(f"--model {text}: cannot import {module} ({type(exc).__name__}: {exc})") from None
+    except Exception as exc:  # a missing module, or one whose own code fails (SyntaxError, a raise at import)
+        raise SpreadgymError(f"--model {text}: cannot import {module} ({type(exc).__name__}: "
+                             f"{first_line(exc)})") from None
     function = getattr(loaded, name, None)
     if not callable(function):
         raise SpreadgymError(f"--model {text}: {module} has no callable {name}")
@@ -166,7 +168,8 @@ def _load_sb3(file: Path, given, algo: Optional[str] = None):
     try:
         return cls.lower(), algo_class.load(file, device="cpu")
     except Exception as exc:
-        raise SpreadgymError(f"--model {given}: could not load a {cls} model ({type(exc).__name__}: {exc})") from None
+        raise SpreadgymError(f"--model {given}: could not load a {cls} model ({type(exc).__name__}: "
+                             f"{first_line(exc)})") from None
 
 
 def _predictor(model, obs_rms) -> Callable[[np.ndarray], np.ndarray]:

@@ -200,8 +200,9 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
     """`env.reset(seed=seed, options=options)` then `env.step(action)` for each reset and
     action in turn, on one SpinnerDesign env (wrappers included): the same returns, bit
     for bit, with the tray tests run as one batch. Each job is reset twice: once to learn
-    the scene its step runs, once to step it. An env that pools runs to a precision, renders
-    or hides a batch (the robust variant) steps each job itself (`batched`)."""
+    the scene its step runs, once to step it. An env that pools runs to a precision or
+    renders steps each job itself (`batched`); hidden batches (the robust variant) run
+    together in one library holding each episode's fertilizer copy."""
     base = env.unwrapped
     task = base.task
     if not batched(base):

@@ -86,10 +86,10 @@ def oracle(truth_scene, width_m: float, start: dict, advised: dict, seed: int) -
     from spreadgym.config.scene import scene_with
 
     scene = scene_with(truth_scene, {**start, "pattern.target_swath_m": width_m})
-    spec = ChartSpec(scene.model_dump(mode="json"), (scene.fertilizer,), (width_m,), scene.pattern.driving,
+    spec = ChartSpec(scene.model_dump(mode="json"), (scene.fertilizer_name,), (width_m,), scene.pattern.driving,
                      ORACLE_BUDGET, scene.sim.granules, seed, objective="nominal", verify_model="compiled",
                      variability=check_variability(None), steady_tolerance_pp=0.0, tie_preference="nearest")
-    cell = Cell(scene.fertilizer, width_m)
+    cell = Cell(scene.fertilizer_name, width_m)
     scorer_seq, cma_seq, *_ = cell_seed(seed, cell).spawn(5)
     scorer = Scorer(spec, cell, scorer_seq)
     neighbour = scorer.space.named_unit(values_of(scorer.space, advised))

@@ -38,7 +38,7 @@ from spreadgym.agents.chart import outputs, sweep
 from spreadgym.agents.chart.search import run_cell, score_candidates
 from spreadgym.agents.chart.spec import Cell, ChartSpec, make_spec
 from spreadgym.agents.chart.store import ChartStore
-from spreadgym.config.base import brief
+from spreadgym.config.base import brief, first_line
 from spreadgym.errors import SpreadgymError
 
 ENGINES = ("ray", "local")
@@ -93,7 +93,7 @@ def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
         try:
             ray.init(address=address, **quiet)
         except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise SpreadgymError(f"--address {address}: cannot join a Ray cluster there ({_first_line(exc)})") from None
+            raise SpreadgymError(f"--address {address}: cannot join a Ray cluster there ({first_line(exc)})") from None
         return True
     cpus = workers or os.cpu_count() or 1
     try:
@@ -103,7 +103,7 @@ def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
                      object_store_memory=OBJECT_STORE_BASE_BYTES + OBJECT_STORE_PER_WORKER_BYTES * cpus, **quiet)
     except Exception as exc:  # whatever stops Ray's processes, the user gets one line
         ray.shutdown()
-        raise SpreadgymError(f"the embedded Ray ({cpus} CPUs) did not start: {_first_line(exc)}") from None
+        raise SpreadgymError(f"the embedded Ray ({cpus} CPUs) did not start: {first_line(exc)}") from None
     return True
 
 
@@ -165,11 +165,6 @@ def end_session() -> None:
         latest = session.parent / "session_latest"
         if latest.is_symlink() and not latest.exists():
             latest.unlink(missing_ok=True)
-
-
-def _first_line(exc: BaseException) -> str:
-    lines = str(exc).strip().splitlines()
-    return brief(lines[0])[1:-1] if lines else type(exc).__name__
 
 
 def cell_with_picture(spec: ChartSpec, cell: Cell, previous=None) -> tuple[dict, bytes]:

@@ -106,7 +106,7 @@ class Scorer:
         """The model of a candidate's runs: the search model, `auto` resolved once on the candidate as
         dialled, so a draw whose disc speed or pitch the variability model nudges past the envelope the
         compiled model was validated in (`selection.VALIDATED`) stays on the candidate's model."""
-        return choose_model(scene_with(self.scene, settings), self.spec.search_model)[0]
+        return choose_model(scene_with(self.scene, settings), self.spec.search_model, self.spec.library())[0]
 
     def score_many(self, units: list, cell_draws: Optional[list] = None,
                    seeds: Optional[list] = None) -> list[tuple]:

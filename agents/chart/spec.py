@@ -17,6 +17,7 @@ import numpy as np
 from spreadgym.agents.chart.variability import check_variability
 from spreadgym.config.base import brief
 from spreadgym.config.materials import MaterialLibrary, load_library
+from spreadgym.config.resources import config_dir
 from spreadgym.config.scene import Scene, bout_trays, check_pooled_work, load_scene, scene_from_dict, scene_with
 from spreadgym.config.settings import SettingsSpace
 from spreadgym.errors import ConfigError, MaterialError, SpreadgymError
@@ -38,7 +39,7 @@ STEADY_TOLERANCE_PP = 2.0  # the default tie: within 2 SE of a cell's best plus 
 TIE_PREFERENCES = ("lowest-rpm", "nearest")  # among tied points (sweep.py): the first is the default
 # What a manifest without the field meant (charts made before the field): a manifest leaves a field out at this
 # value, and an older chart folder or chart.json is read with it
-MANIFEST_DEFAULTS = {"steady_tolerance_pp": 0.0, "tie_preference": "nearest"}
+MANIFEST_DEFAULTS = {"steady_tolerance_pp": 0.0, "tie_preference": "nearest", "materials": None}
 READ_DEFAULTS = {**MANIFEST_DEFAULTS, "objective": "nominal"}  # a record without `objective` predates robust cells
 OBJECTIVES = ("robust", "nominal")  # robust: the search minimises the variability model's quantile
 METHODS = ("cmaes", "policy", "policy+search")
@@ -79,6 +80,7 @@ class ChartSpec:
     variability: dict = field(default_factory=check_variability)  # the checked variability model
     steady_tolerance_pp: float = STEADY_TOLERANCE_PP  # the tie test: within 2 SE of the best plus this many pp
     tie_preference: str = TIE_PREFERENCES[0]  # which tied point a cell takes (sweep.py): lowest-rpm or nearest
+    materials: Optional[dict] = None  # the chart fertilizers a user's materials file gave: {name: entry}
 
     @property
     def cells(self) -> list[Cell]:
@@ -129,9 +131,10 @@ class ChartSpec:
         return scene_from_dict(self.scene)
 
     def library(self) -> MaterialLibrary:
-        """The material library the cells run with: the process's (a user's materials file included) and
-        the base scene's inline fertilizer under its name."""
-        return load_library().with_inline(self.base_scene())
+        """The material library the cells run with, wherever they run (a cluster's workers included): the
+        shipped one, the user's fertilizers the spec records, the base scene's inline fertilizer by its name."""
+        return load_library(path=config_dir() / "materials.yaml").with_entries(self.materials or {}) \
+            .with_inline(self.base_scene())
 
     def cell_scene(self, cell: Cell) -> Scene:
         """The base scene for one cell: its fertilizer, width, driving and granule count."""
@@ -239,7 +242,6 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
     unknown objective or method, a steady tolerance not a number in [0, 100] pp, a policy
     given without a policy method or missing where the scene has no shipped one
     (`policy.shipped_policy`), a variability entry out of range."""
-    library = library or load_library()
     if objective not in OBJECTIVES:
         raise SpreadgymError(f"--objective: {brief(objective)}; allowed: {', '.join(OBJECTIVES)}")
     if method not in METHODS:
@@ -251,6 +253,7 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
     if tie_preference not in TIE_PREFERENCES:
         raise SpreadgymError(f"tie preference: {brief(tie_preference)}; allowed: {', '.join(TIE_PREFERENCES)}")
     base = load_scene(scene)
+    library = (library or load_library()).with_inline(base)  # the scene's own fertilizer is a chart fertilizer too
     if not 1 <= int(budget) <= MAX_BUDGET:
         raise SpreadgymError(f"--budget: {budget} is out of range; allowed [1, {MAX_BUDGET}] simulations")
     if int(seed) < 0:
@@ -279,7 +282,8 @@ def make_spec(scene: str, fertilizers, widths, driving: Optional[str] = None, bu
         names, notes = _policy_fertilizers(names, notes, fertilizers, policy, digest)
     spec = ChartSpec(base.model_dump(mode="json"), names, tuple(sorted(widths_m)), driving, int(budget), granules,
                      int(seed), search_model, verify_model, int(verify_runs), settings, objective, method, policy,
-                     digest, variability, steady_tolerance_pp, tie_preference)
+                     digest, variability, steady_tolerance_pp, tie_preference,
+                     {n: library.user_entries[n] for n in names if n in library.user_entries} or None)
     try:
         scene = spec.cell_scene(spec.cells[0])
         check_pooled_work(scene, spec.verify_runs, "--granules")

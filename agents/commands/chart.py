@@ -79,13 +79,9 @@ def run(args: argparse.Namespace) -> int:
     from spreadgym.agents.chart import chart
     from spreadgym.agents.chart.outputs import markdown
     from spreadgym.config.materials import user_materials
-    from spreadgym.errors import ConfigError
     from spreadgym.report import print_json
 
-    if args.materials is not None and args.address is not None:  # a cluster's workers read their own disks
-        raise ConfigError("--materials", "not with --address: a cluster's workers cannot read this machine's file; "
-                          "put it on every node and set SPREADGYM_MATERIALS there")
-    with user_materials(args.materials):  # the cells' workers (the embedded Ray's) inherit it
+    with user_materials(args.materials):  # the spec records the chart's fertilizers from it: workers need no file
         result = chart(args.scene, args.fertilizers, args.widths, args.out, driving=args.driving,
                        budget=args.budget, granules=args.granules, seed=args.seed, workers=args.workers,
                        address=args.address, method=args.method, objective=args.objective, policy=args.policy,

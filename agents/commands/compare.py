@@ -116,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
     per_worker = max(1, (args.threads or thread_count()) // args.workers)  # the two levels never multiply
     set_threads(per_worker)
     policies = _load_policies(args.model or [], args.env)
+    from spreadgym.agents.policies import DEFAULT_ENV
+
     env_id = ev.canonical_env_id(args.env or (policies[0][1].env_id if policies else DEFAULT_ENV))
     train_kwargs = policies[0][1].env_kwargs if policies else {}
     env_kwargs = evaluation_env_kwargs(train_kwargs, args.granules)
@@ -177,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
         s["runs"] = 1 + max((r.extra.get("run", 0) for r in rows[m]), default=0)
         summaries.append(s)
     ev.mark_ties(summaries)
-    aggregated = _aggregate(env_id, jobs, rows, order, summaries)
+    aggregated = _aggregate(env_id, jobs, rows, order, summaries, env_kwargs)
     elapsed = time.perf_counter() - started
     with out_folder(args).writing() as folder:
         written = write_outputs(folder, summaries, rows, order, titles, args, env_kwargs, elapsed, aggregated)
@@ -201,7 +203,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-DEFAULT_ENV = "spreadgym/SpinnerDesign-v1"
 NORMALISED_COLUMNS = (
     ("method", "method"),
     ("runs", "runs"),
@@ -215,11 +216,16 @@ NORMALISED_COLUMNS = (
 )
 
 
-def _aggregate(env_id: str, jobs, rows: dict, order: list, summaries: list) -> dict:
+def _aggregate(env_id: str, jobs, rows: dict, order: list, summaries: list, env_kwargs: dict) -> dict:
     """rliable's IQM (stratified bootstrap 95 % interval) of each method's normalised scores
-    (docs/benchmark.md), put into `summaries`, where the benchmark's references cover every job."""
+    (docs/benchmark.md), put into `summaries`, where the benchmark's references cover every job
+    and were made on the env as it runs here (no keyword but the granules and the device changed)."""
     from spreadgym.agents import benchmark
 
+    changed = {k: v for k, v in env_kwargs.items() if k not in ("device", "granules")}  # the reward's own keys
+    if changed:
+        return {"matrices": {}, "note": f"no normalised scores: the benchmark's references were made on {env_id} "
+                                         f"as shipped; this evaluation changes {', '.join(sorted(changed))}"}
     references = benchmark.shipped_references(env_id)
     labels = [ctx.label for ctx in jobs]
     if references is None or any(label not in references["jobs"] for label in labels):
@@ -274,6 +280,8 @@ def _load_policies(specs, env_id) -> list:
     for spec in specs:
         labelled = re.match(r"^([\w.-]+)=(.+)$", spec)
         label, given = (labelled.group(1), labelled.group(2)) if labelled else ("", spec)
+        if label in METHODS:
+            raise SpreadgymError(f"--model {spec}: {label!r} names a baseline method; label the run otherwise")
         policy = load_any_policy(given, env_id)
         if "SpinnerDesign" not in policy.env_id:
             raise SpreadgymError(f"--model {given}: compare needs a SpinnerDesign policy "

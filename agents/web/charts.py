@@ -95,7 +95,7 @@ def estimate_s(spec, workers: int) -> float:
 
     def timed(model: str) -> float:
         started = time.perf_counter()
-        run_scene(probe, model=model, ci=False)
+        run_scene(probe, model=model, library=spec.library(), ci=False)
         return (time.perf_counter() - started) * scale
 
     cell = spec.budget * spec.draws * timed(spec.search_model) + spec.verify_simulations * timed(spec.verify_model)

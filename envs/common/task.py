@@ -183,7 +183,7 @@ class Task:
                     resolve_contacts(scene, self.library)
                 except MaterialError as exc:
                     raise ConfigError("context", f"{fertilizer} on {material}: {exc}") from None
-                choose_model(scene, cfg.model)
+                choose_model(scene, cfg.model, self.library)
         for end in (-1.0, 1.0):
             settings = self.settings_map.to_settings(np.full(self.settings_map.size, end))
             scene_with(self.base_scene, self.settings_map.scene_overrides(settings))

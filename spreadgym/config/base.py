@@ -39,6 +39,12 @@ def brief(value: Any) -> str:
     return _BRIEF.repr(value)
 
 
+def first_line(exc: BaseException) -> str:
+    """An exception's message as one short line: its first line, cut as `brief` cuts (its type's name when empty)."""
+    lines = str(exc).strip().splitlines()
+    return brief(lines[0])[1:-1] if lines else type(exc).__name__
+
+
 _BOUNDS = {annotated_types.Ge: (">=", "ge"), annotated_types.Gt: (">", "gt"), annotated_types.Le: ("<=", "le"),
            annotated_types.Lt: ("<", "lt")}
 

@@ -191,6 +191,14 @@ class MaterialLibrary:
             return Fertilizer.from_spec(chosen.name or INLINE_NAME, chosen)
         return self.fertilizer(chosen)
 
+    def with_entries(self, entries: Mapping[str, Mapping[str, Any]]) -> "MaterialLibrary":
+        """This library with `entries` (complete fertilizer entries by name, as `user_entries` holds them)
+        over it: what a chart records of a user's materials file, so it runs anywhere from its manifest."""
+        made = {name: Fertilizer.from_spec(name, validate(FertilizerSpec, dict(entry), f"fertilizers.{name}"))
+                for name, entry in entries.items()}
+        return replace(self, fertilizers={**self.fertilizers, **made},
+                       user_entries={**self.user_entries, **entries})
+
     def with_inline(self, scene: Any) -> "MaterialLibrary":
         """This library with `scene`'s inline fertilizer under its name (over a library entry of that
         name), for code that names fertilizers (charts, the variability model's copies); itself otherwise."""

@@ -114,16 +114,16 @@ VALIDATED = {
 }
 
 
-def _rolling_resistance(scene: Scene) -> float:
-    """The vane rolling resistance the scene runs with (0 where its pair is not known: the
-    run itself then names the missing pair)."""
+def _rolling_resistance(scene: Scene, library=None) -> float:
+    """The vane rolling resistance the scene runs with, from `library` (default the process's;
+    0 where its pair is not known: the run itself then names the missing pair)."""
     from spreadgym.config.materials import load_library
     from spreadgym.errors import MaterialError
 
     if scene.contact.rolling_resistance is not None:
         return float(scene.contact.rolling_resistance)
     try:
-        return load_library().fertilizer_of(scene).pair("rolling_resistance", scene.vane_material)
+        return (library or load_library()).fertilizer_of(scene).pair("rolling_resistance", scene.vane_material)
     except MaterialError:
         return 0.0
 
@@ -134,11 +134,11 @@ granule against two at once; the compiled plate stage takes one bounce at a time
 was measured where plates stand apart (docs/fidelity.md)."""
 
 
-def outside_validated(scene: Scene) -> list[str]:
+def outside_validated(scene: Scene, library=None) -> list[str]:
     """What puts `scene` outside the envelope `compiled` was validated in (empty: inside)."""
     values = {"rpm": [scene.spinner.rpm], "pitch_deg": scene.vanes.per_vane("pitch_deg"),
               "drop_height_m": [scene.feed.drop_height_m], "radius_m": [scene.spinner.radius_m],
-              "rolling_resistance": [_rolling_resistance(scene)]}
+              "rolling_resistance": [_rolling_resistance(scene, library)]}
     out = []
     for key, (lo, hi) in VALIDATED.items():
         bad = [v for v in values[key] if not lo - 1e-9 <= v <= hi + 1e-9]
@@ -165,13 +165,14 @@ def _plates_too_close(scene: Scene) -> list[str]:
     return out
 
 
-def choose_model(scene: Scene, requested: str = "auto") -> tuple[str, str]:
-    """(model name, reason). `requested` other than auto is honoured as it is."""
+def choose_model(scene: Scene, requested: str = "auto", library=None) -> tuple[str, str]:
+    """(model name, reason). `requested` other than auto is honoured as it is; `library` (default
+    the process's) holds the scene's fertilizer, whose rolling resistance the envelope bounds."""
     if requested not in MODELS:
         raise ConfigError("model", f"unknown model {requested!r}; allowed: {', '.join(MODELS)}")
     if requested != "auto":
         return requested, "requested"
-    outside = outside_validated(scene)
+    outside = outside_validated(scene, library)
     if outside:
         return "pymunk", (f"auto: {'; '.join(outside)}, where the fast compiled model has not been checked "
                           "against the full model, so the full model runs")

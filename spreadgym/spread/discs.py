@@ -123,9 +123,9 @@ def _close(x, y) -> bool:
     return x == y
 
 
-def choose_for_discs(parts: list[Disc], requested: str) -> tuple[str, str]:
+def choose_for_discs(parts: list[Disc], requested: str, library=None) -> tuple[str, str]:
     """One model for every disc: `auto` takes the full model if any disc needs it."""
-    choices = [choose_model(d.scene, requested) for d in parts]
+    choices = [choose_model(d.scene, requested, library) for d in parts]
     return next((c for c in choices if c[0] != choices[0][0]), choices[0])
 
 

@@ -74,7 +74,7 @@ class ScenePlan:
 def plan_scene(scene: Scene, model: str, library: MaterialLibrary, first_replicate: int = 0) -> ScenePlan:
     """The discs, model, granules (the replicates of sim.seed from `first_replicate`) and contacts of `scene`."""
     parts = discs.discs(scene)
-    chosen, reason = discs.choose_for_discs(parts, model)
+    chosen, reason = discs.choose_for_discs(parts, model, library)
     fertilizer = library.fertilizer_of(scene)
     spins: list[Optional[tuple[GranuleBatch, Contacts]]] = []
     for i, disc in enumerate(parts):

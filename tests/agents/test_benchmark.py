@@ -12,6 +12,7 @@ import pytest
 from spreadgym.agents import benchmark as bm
 from spreadgym.agents.evaluation import make_env
 from spreadgym.cli.main import main
+from spreadgym.errors import SpreadgymError
 
 GRANULES = 48
 
@@ -53,7 +54,8 @@ def test_normalised_scores_are_0_at_the_random_action_and_1_at_the_best_setting(
     assert bm.normalise(-0.4, -0.4, -0.05) == 0.0
     assert bm.normalise(-0.05, -0.4, -0.05) == pytest.approx(1.0)
     assert bm.normalise(-0.225, -0.4, -0.05) == pytest.approx(0.5)
-    assert np.isnan(bm.normalise(-0.1, -0.1, -0.1))  # no span: no score, never a division by zero
+    with pytest.raises(SpreadgymError, match="not above the random action's"):  # no span: no score, no NaN
+        bm.normalise(-0.1, -0.1, -0.1)
 
 
 def test_performance_profiles_count_the_share_above_tau():
@@ -194,3 +196,16 @@ def test_compare_without_references_says_so(capsys, tmp_path, monkeypatch):
                                       "--fertilizers", "pellet", "--swaths", "2.9", "--out", str(tmp_path)])
     assert code == 0, err
     assert "no normalised scores" in out and not (tmp_path / "profiles.png").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--model", "cmaes={callable}:policy"], "'cmaes' names a baseline method"),
+    (["--model", "{broken}:policy"], "cannot import"),
+])
+def test_a_label_naming_a_baseline_and_a_broken_callable_are_one_line(callable_file, capsys, tmp_path, argv,
+                                                                      message):
+    broken = tmp_path / "broken.py"
+    broken.write_text("def policy(obs:\n    return obs\n")  # a SyntaxError in the user's own file
+    argv = [a.format(callable=callable_file, broken=broken) for a in argv]
+    code, _, err = run_cli(capsys, ["compare", *argv, "--out", str(tmp_path / "out")])
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err

@@ -285,21 +285,23 @@ def test_the_search_objective_charges_mass_that_missed_the_trays():
     assert objective(metrics(None), 24.0)[0] == pytest.approx(106.0)  # nothing released
 
 
-def test_chart_materials_runs_the_users_fertilizer_and_stays_local(copied_fertilizer, tmp_path, capsys):
-    """chart --materials FILE: the file's fertilizers are chart fertilizers ('all' offers them), run where the
-    cells run (the workers inherit SPREADGYM_MATERIALS); with --address it is refused in one line (a cluster's
-    workers cannot read this machine's file)."""
+def test_chart_materials_runs_the_users_fertilizer_from_its_manifest(copied_fertilizer, tmp_path):
+    """chart --materials FILE: the file's fertilizers are chart fertilizers ('all' offers them); the spec records
+    their entries, so the cells run them without the file (a cluster's workers) and a changed file is noticed."""
     from spreadgym.config.materials import MATERIALS_ENV, user_materials
 
     path, name = copied_fertilizer
     with user_materials(path):
         assert name in make_spec("paper", "all", "3", **SMALL)[0].fertilizers
-        result = run_chart(make_spec("paper", name, "3", **SMALL)[0], tmp_path / "mine", engine="local",
-                           progress=False)
-    assert MATERIALS_ENV not in os.environ
+        spec = make_spec("paper", name, "3", **SMALL)[0]
+    assert MATERIALS_ENV not in os.environ and set(spec.manifest()["materials"]) == {name}
+    result = run_chart(spec, tmp_path / "mine", engine="local", progress=False)  # no file, no variable: the spec
     (row,) = result.payload["rows"]
     assert row["fertilizer"] == name and 0 < row["cv_percent"] < 100
-    out = tmp_path / "refused"
-    code = main(BASE + ["--materials", str(path), "--address", "127.0.0.1:6379", "--out", str(out)])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and "--materials: not with --address" in err[-1] and not out.exists()
+    changed = tmp_path / "changed.yaml"
+    changed.write_text(path.read_text().replace("particle_density_kg_m3: 1734.0", "particle_density_kg_m3: 1800.0"))
+    with user_materials(changed):
+        other = make_spec("paper", name, "3", **SMALL)[0]
+    assert other.manifest()["materials"][name]["particle_density_kg_m3"] == 1800.0
+    with pytest.raises(SpreadgymError):
+        run_chart(other, tmp_path / "mine", engine="local", progress=False)

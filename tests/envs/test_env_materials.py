@@ -1,6 +1,8 @@
 """A user's fertilizer in the envs (the `materials` keyword): a value-for-value copy of a
 library fertilizer, under its own name, steps exactly as the original does."""
 
+from dataclasses import replace
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -35,3 +37,21 @@ def test_a_user_fertilizer_without_its_file_and_a_bad_file_are_one_line(copied_f
     with pytest.raises(ConfigError, match="materials: .*nothing.yaml: file not found") as info:
         gym.make(DESIGN_ID, materials=str(tmp_path / "nothing.yaml"), **SMALL)
     assert "\n" not in str(info.value)
+
+
+def test_auto_reads_the_rolling_resistance_from_the_library_the_run_is_given(copied_fertilizer):
+    """A user fertilizer rolling harder than the compiled model was checked at (0.31) sends `auto` to the full
+    model through the library the run is given (an env's `materials`), not the process's."""
+    from spreadgym.config.materials import load_library
+    from spreadgym.config.scene import load_scene
+    from spreadgym.physics.selection import VALIDATED, choose_model
+
+    path, name = copied_fertilizer
+    rough_library = load_library(extra=path)  # the copy, then its rolling resistance raised over it
+    rough_library = replace(rough_library, fertilizers={**rough_library.fertilizers, name: replace(
+        rough_library.fertilizer(name), rolling_resistance={"mc": 0.5, "steel": 0.5, "pvc": 0.5})})
+    scene = load_scene("paper", {"fertilizer": name})
+    assert 0.5 > VALIDATED["rolling_resistance"][1]
+    assert choose_model(scene, "auto", load_library(extra=path))[0] == "compiled"
+    model, reason = choose_model(scene, "auto", rough_library)
+    assert model == "pymunk" and "rolling" in reason
