@@ -68,7 +68,6 @@ class Rung:
     env_id: str
     seeds: int
     methods: tuple
-    pending: str = ""  # why its runs wait (nothing: they run)
 
 
 RUNGS = {
@@ -391,9 +390,6 @@ def rung_table(out: Path, rung: Rung) -> Optional[tuple[list[dict], dict]]:
 def run_rung(out: Path, rung: Rung, methods: Optional[Sequence[str]] = None, parts=("train", "reference", "score"),
              progress: Callable[[str], None] = print) -> None:
     """Run what `rung` still lacks: training runs, its reference, each method's scored runs."""
-    if rung.pending:
-        progress(f"{rung.key}: runs wait ({rung.pending})")
-        return
     methods = [m for m in rung.methods if methods is None or m in methods]
     if "train" in parts:
         for method in methods:
@@ -421,8 +417,7 @@ def rung_speed(rung: Rung, designs: int = 32, repeats: int = 3) -> dict:
     """Env steps per second of `rung` at its scoring settings: one env at one thread (one
     core), and its native vector env of `designs` sub-envs (fewer where the landing-point
     budget says so) at every thread spreadgym may use (all cores, same-step autoreset);
-    medians of `repeats` interleaved blocks of `designs` random steps, with their ranges.
-    The plate rung, at seconds a step, is timed on blocks of 2."""
+    medians of `repeats` interleaved blocks of `designs` random steps, with their ranges."""
     import gymnasium as gym
 
     from spreadgym import threads
@@ -431,8 +426,6 @@ def rung_speed(rung: Rung, designs: int = 32, repeats: int = 3) -> dict:
 
     env = gym.make(rung.env_id)
     batch = min(designs, MAX_GRANULE_COPIES // granule_copies(env.unwrapped.task.base_scene))
-    if rung.pending:
-        batch = designs = 2
     venv = gym.make_vec(rung.env_id, num_envs=batch, autoreset_mode="same_step")
     env.reset(seed=0)
     venv.reset(seed=0)
@@ -473,9 +466,6 @@ def benchmark_rows(out: Path, docs: Path, progress: Callable[[str], None] = prin
     for rung in RUNGS.values():
         progress(f"{rung.key}: steps/s")
         speed = rung_speed(rung, repeats=speed_repeats)
-        if rung.pending:
-            rows.append({"rung": rung.key, "env": rung.env_id, "method": f"(runs wait: {rung.pending})", **speed})
-            continue
         found = rung_table(out, rung)
         if found is None:
             missing.append(rung.key)
@@ -510,10 +500,6 @@ def markdown(rows: list[dict]) -> str:
             "/ job | training sims (granules) | training min (median) | steps/s one core | steps/s all cores |")
     lines = [head, "|" + "---|" * 11]
     for r in rows:
-        if "iqm" not in r:
-            lines.append(f"| {r['rung']} | {r['method']} | - | - | - | - | - | - | - | "
-                         f"{r['steps_per_s_one_core']:.2f} | {r['steps_per_s_all_cores']:.2f} |")
-            continue
         train = (f"{r['training_simulations']} ({r['training_granules']})" if r["training_simulations"] else "0")
         minutes = f"{r['training_wall_s_median'] / 60:.1f}" if r.get("training_wall_s_median") else "-"
         lines.append(
