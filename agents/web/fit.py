@@ -17,28 +17,28 @@ from spreadgym.config.base import brief
 from spreadgym.errors import SpreadgymError
 
 
-class FitRequest(BaseModel):
-    """`POST /api/fit`: the flags of `spreadgym fit`, the tray file as text."""
+class TrayTestRequest(BaseModel):
+    """What a request about a tray test gives: the machine, the test's settings and the tray file as text."""
 
     model_config = ConfigDict(extra="forbid")
     scene: str = Field(default="paper", max_length=200, description="shipped scene name")
     yaml: Optional[str] = Field(default=None, description="an uploaded scene's YAML text (instead of a name)")
     set: dict[str, Any] = Field(default_factory=dict, description="--set KEY=VALUE: the test's settings")
     trays: str = Field(description="the tray test CSV: columns x_m, mass_g[, pass]")
+
+
+class FitRequest(TrayTestRequest):
+    """`POST /api/fit`: the flags of `spreadgym fit`, the tray file as text."""
+
     fit: list[str] = Field(description="--fit KEY=LO:HI items")
     model: str = "auto"
     granules: Optional[int] = None
     seed: Optional[int] = None
 
 
-class AdviseRequest(BaseModel):
+class AdviseRequest(TrayTestRequest):
     """`POST /api/advise`: the flags of `spreadgym advise`, the tray file as text."""
 
-    model_config = ConfigDict(extra="forbid")
-    scene: str = Field(default="paper", max_length=200, description="shipped scene name")
-    yaml: Optional[str] = Field(default=None, description="an uploaded scene's YAML text (instead of a name)")
-    set: dict[str, Any] = Field(default_factory=dict, description="--set KEY=VALUE: the test's settings")
-    trays: str = Field(description="the tray test CSV: columns x_m, mass_g[, pass]")
     width: float = Field(description="--width: the working width wanted, m")
     fit: Optional[list[str]] = Field(default=None, description="--fit KEY=LO:HI items (default: advise's)")
     budget: Optional[int] = None
