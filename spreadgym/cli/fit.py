@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from spreadgym.config.scene import load_scene, scene_with
     from spreadgym.fit.outputs import OUTPUT_FILES, payload, predict, write_outputs
     from spreadgym.fit.run import fit_tray_test, work_text
-    from spreadgym.fit.space import parse_fit_specs
+    from spreadgym.fit.space import full_model_corner, parse_fit_specs
     from spreadgym.fit.trays import read_trays
     from spreadgym.out_folder import OutFolder, named_files
     from spreadgym.threads import set_threads
@@ -65,6 +65,11 @@ def run(args: argparse.Namespace) -> int:
         out.check()
     print(f"fitting {', '.join(space.keys)} to {test.count} trays: {work_text(scene, args.granules)} ...",
           file=sys.stderr)
+    slow = full_model_corner(space, scene, args.model)
+    if slow:  # said before the work: such a fit takes minutes to hours instead of seconds
+        print(f"note: part of the search box runs the full model ({slow}); those evaluations are about a "
+              "hundred times slower: narrow the range, or pass --model compiled to stay on the fast model "
+              "(docs/fit.md)", file=sys.stderr)
     fit = fit_tray_test(scene, space, test, model=args.model, granules=args.granules, seed=seed)
     prediction = predict(fit)
     if out is None:

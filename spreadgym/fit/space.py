@@ -115,3 +115,20 @@ def _check_box(space: FitSpace, scene: Scene) -> None:
             point = ", ".join(f"{k}={v:g}" for k, v in values.items())
             raise SpreadgymError(f"--fit: the search box's {'centre' if 0.5 in corner else 'corner'} {point} is not "
                                  f"a valid scene ({exc}); narrow the ranges") from None
+
+
+def full_model_corner(space: FitSpace, scene: Scene, model: str = "auto") -> str:
+    """Where `auto` leaves the compiled model inside the search box: "" when every corner of the box (and
+    its centre) runs `model` as the compiled one, else the first such corner and auto's reason. The
+    evaluations there run the full model, a hundred times slower (a rolling resistance fitted past the
+    compiled model's validated envelope, for one)."""
+    from spreadgym.physics.selection import choose_model
+
+    if model != "auto":
+        return ""
+    for corner in [*itertools.product((0.0, 1.0), repeat=space.dims), (0.5,) * space.dims]:
+        values = space.overrides(corner)
+        chosen, reason = choose_model(scene_with(scene, values), model)
+        if chosen != "compiled":
+            return f"{', '.join(f'{k}={v:g}' for k, v in values.items())}: {reason}"
+    return ""
