@@ -105,9 +105,14 @@ def _value(scene: Scene, key: str) -> Any:
     return node
 
 
+def _box_points(space: FitSpace) -> list[tuple[float, ...]]:
+    """Every corner of the search box (2^d, d <= MAX_KEYS) and its centre, in the unit cube."""
+    return [*itertools.product((0.0, 1.0), repeat=space.dims), (0.5,) * space.dims]
+
+
 def _check_box(space: FitSpace, scene: Scene) -> None:
-    """Every corner of the search box (2^d, d <= MAX_KEYS) and its centre make a valid scene."""
-    for corner in [*itertools.product((0.0, 1.0), repeat=space.dims), (0.5,) * space.dims]:
+    """Every corner of the search box and its centre make a valid scene."""
+    for corner in _box_points(space):
         values = space.overrides(corner)
         try:
             scene_with(scene, values)
@@ -126,7 +131,7 @@ def full_model_corner(space: FitSpace, scene: Scene, model: str = "auto") -> str
 
     if model != "auto":
         return ""
-    for corner in [*itertools.product((0.0, 1.0), repeat=space.dims), (0.5,) * space.dims]:
+    for corner in _box_points(space):
         values = space.overrides(corner)
         chosen, reason = choose_model(scene_with(scene, values), model)
         if chosen != "compiled":
