@@ -15,12 +15,11 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import json
-import os
 import socket
 from pathlib import Path
 
 from spreadgym.cli import arguments
-from spreadgym.config.materials import MATERIALS_ENV
+from spreadgym.config.materials import user_materials
 from spreadgym.errors import SpreadgymError
 
 DEFAULT_HOST = "127.0.0.1"  # this machine only, unless --host and --allow-remote say otherwise
@@ -84,8 +83,6 @@ def run(args: argparse.Namespace) -> int:
     from spreadgym.agents.web.app import create_app
 
     sock = listening_socket(args.host, args.port, args.allow_remote)
-    if args.materials is not None:  # the whole server's library, its workers' and chart jobs' too (they inherit it)
-        os.environ[MATERIALS_ENV] = str(args.materials.resolve())
     if not is_loopback(args.host):
         print(exposure(args.host, args.port, args.charts))
     print(f"spreadgym serve: http://{args.host}:{args.port}/ (charts under {args.charts}; Ctrl-C stops)", flush=True)
@@ -99,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
         exit_server(sig, frame)
 
     server.handle_exit = handle_exit
-    server.run(sockets=[sock])
+    with user_materials(args.materials):  # the whole server's library: its workers and chart jobs inherit it
+        server.run(sockets=[sock])
     return 0
 
 
