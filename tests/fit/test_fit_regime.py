@@ -70,7 +70,7 @@ def test_an_interval_across_the_change_of_regime_is_not_identifiable():
 
 
 def test_a_search_box_past_the_compiled_models_envelope_is_said_before_the_fit():
-    """A rolling resistance searched past 0.31 (the compiled model's validated envelope) sends `auto`'s
+    """A rolling resistance searched past 0.6 (the compiled model's validated envelope) sends `auto`'s
     evaluations there to the full model; the fit names the corner before it starts, and says nothing for a box
     inside the envelope or a model given by name."""
     from spreadgym.config.scene import load_scene
@@ -79,8 +79,8 @@ def test_a_search_box_past_the_compiled_models_envelope_is_said_before_the_fit()
 
     scene = load_scene("paper", {"granule.rotation": "free"})
     inside = parse_fit_specs([f"contact.rolling_resistance=0:{VALIDATED['rolling_resistance'][1]}"], scene)
-    past = parse_fit_specs(["contact.vane_friction=0.2:0.8,contact.rolling_resistance=0:0.6"], scene)
+    past = parse_fit_specs(["contact.vane_friction=0.2:0.8,contact.rolling_resistance=0:0.8"], scene)
     assert full_model_corner(inside, scene) == ""
     said = full_model_corner(past, scene)
-    assert "contact.rolling_resistance=0.6" in said and "full model runs" in said
+    assert "contact.rolling_resistance=0.8" in said and "full model runs" in said
     assert full_model_corner(past, scene, "compiled") == ""
