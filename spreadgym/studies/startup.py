@@ -10,15 +10,22 @@ import subprocess
 import sys
 import time
 
+INLINE_FERTILIZER = ("fertilizer={name: my-blend, particle_density_kg_m3: 1650, friction: {mc: 0.45}, "
+                     "restitution: {mc: 0.40}, rolling_resistance: {mc: 0.1}, "
+                     "size: {d50_m: 0.0032, sd_m: 0.0005, min_m: 0.002, max_m: 0.005}}")
+"""A fertilizer given inline in the scene (docs/materials.md's example), rolling resistance on."""
+
 COMMANDS = (
     ("--help",),
     ("materials",),
     ("simulate", "--scene", "paper", "--json"),
+    ("simulate", "--scene", "paper", "--set", "fertilizer=potassium-chloride", "--json"),
+    ("simulate", "--scene", "paper", "--set", INLINE_FERTILIZER, "--json"),
     ("simulate", "--scene", "field", "--json"),
     ("reference", "--scene", "paper", "--json"),
     ("chart", "--help"),
 )
-TARGETS_S = {("--help",): 0.6, ("simulate", "--scene", "paper", "--json"): 1.5}
+TARGETS_S = {("--help",): 0.6, ("simulate", "--scene", "paper", "--json"): 1.5, COMMANDS[3]: 1.5, COMMANDS[4]: 1.5}
 
 
 def startup_rows(repeats: int = 3) -> list[dict]:
