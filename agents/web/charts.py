@@ -31,6 +31,7 @@ FILE_TYPES = {".png": "image/png", ".csv": "text/csv", ".json": "application/jso
               ".html": "text/html"}
 MAX_READ_BYTES = 5_000_000  # chart.json / chart.md read for the page
 CANCEL_WAIT_S = 30.0  # after Ctrl-C, before the job's process is terminated
+STOP_WAIT_S = 5.0  # after the kill, for the job's process group to be gone
 SHUTDOWN_WAIT_S = 3.0  # the same when the server stops: it stops within a few seconds (finished cells are on disk)
 PROBE_GRANULES = 256  # the start's estimate times one run of this many granules per model, scaled to the chart's
 RAY_START_S = 10.0  # the embedded Ray's start in the estimate (6-8 s on an idle two-core machine)
@@ -219,12 +220,23 @@ def _job(options: dict, out: str, events) -> None:
         events.put(("failed", f"{type(exc).__name__}: {exc}"))
 
 
-def _stop_group(leader: int) -> None:
-    """Kill what is left of a finished job's process group (Ray's helpers after an interrupted start)."""
+def _stop_group(process, wait_s: float = STOP_WAIT_S) -> None:
+    """Kill what is left of a job's process group (`process` leads it; Ray's helpers after an interrupted start),
+    reap the leader and wait until the group is gone, at most `wait_s` (a killed process lingers until it exits
+    and is reaped: longer on a loaded machine)."""
+    leader = process.pid
     try:
         os.killpg(leader, signal.SIGKILL)
     except (ProcessLookupError, PermissionError):
-        pass
+        return
+    process.join(timeout=wait_s)
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(leader, 0)
+        except (ProcessLookupError, PermissionError):
+            return
+        time.sleep(0.02)
 
 
 class ChartJobs:
@@ -326,7 +338,7 @@ class ChartJobs:
             except queue.Empty:
                 if process.is_alive():
                     continue
-                _stop_group(process.pid)
+                _stop_group(process)
                 with self.lock:
                     if self.status["state"] == "running" and self.cancelling:
                         self.status.update(state="cancelled", message="cancelled", ended=time.time())
@@ -339,7 +351,7 @@ class ChartJobs:
                     continue
                 self.status.update(state=kind, message=text, ended=time.time())
             process.join(timeout=CANCEL_WAIT_S)
-            _stop_group(process.pid)
+            _stop_group(process)
             return
 
     def cancel(self, wait_s: float = CANCEL_WAIT_S) -> dict:
@@ -354,8 +366,7 @@ class ChartJobs:
         except ProcessLookupError:  # it ended just now
             pass
         process.join(timeout=wait_s)
-        _stop_group(process.pid)
-        process.join(timeout=5.0)
+        _stop_group(process)
         with self.lock:
             if self.status["state"] == "running":
                 self.status.update(state="cancelled", message="cancelled; finished cells kept", ended=time.time())
