@@ -25,7 +25,7 @@ COMMANDS = (
     ("reference", "--scene", "paper", "--json"),
     ("chart", "--help"),
 )
-TARGETS_S = {("--help",): 0.6, ("simulate", "--scene", "paper", "--json"): 1.5, COMMANDS[3]: 1.5, COMMANDS[4]: 1.5}
+TARGETS_S = {COMMANDS[0]: 0.6, **dict.fromkeys(COMMANDS[2:5], 1.5)}  # --help; simulate paper, KCl, inline
 
 
 def startup_rows(repeats: int = 3) -> list[dict]:
