@@ -255,11 +255,11 @@ def _truncated_normal(mean, sd, lo, hi, uniform) -> np.ndarray:
     return mean + sd * ndtri(a + (b - a) * uniform)
 
 
-def pulled_back_by_clip(release_xy_m: np.ndarray, scene: Scene) -> np.ndarray:
-    """(N,) bool: the release points `sample_granules` pulled back onto the clip radius
-    (RELEASE_CLIP_SHARE of the vanes' outer radius; such a point sits on it to rounding)."""
-    r = np.hypot(release_xy_m[:, 0], release_xy_m[:, 1])
-    return ~(r < RELEASE_CLIP_SHARE * scene.vane_outer_radius_m * (1.0 - 1e-12))
+def clip_test_radius_m(scene: Scene) -> float:
+    """The radius at or beyond which a release point counts as pulled back onto the clip
+    radius by `sample_granules` (RELEASE_CLIP_SHARE of the vanes' outer radius; such a point
+    sits on it to rounding), m."""
+    return RELEASE_CLIP_SHARE * scene.vane_outer_radius_m * (1.0 - 1e-12)
 
 
 def _clip_inside(xy: np.ndarray, radius: float) -> np.ndarray:

@@ -32,6 +32,7 @@ from spreadgym.config.scene import Scene
 from spreadgym.errors import ConfigError
 from spreadgym.physics.selection import SPINNER_MODELS
 from spreadgym.spread.pipeline import SimulationResult, finish_scene, plan_scene
+from spreadgym.spread.plain_finish import finish_plain, is_plain
 from spreadgym.threads import thread_map
 
 
@@ -61,7 +62,14 @@ def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[Ma
         for owner, departure in zip(owners, SPINNER_MODELS[chosen].run_batch(runs)):
             departures[owner].append(departure)
 
-    results = thread_map(lambda i: finish_scene(plans[i], departures[i], ci), len(plans))
+    plain = [i for i, plan in enumerate(plans) if is_plain(plan)]
+    others = [i for i, plan in enumerate(plans) if not is_plain(plan)]
+    results: list = [None] * len(plans)
+    for i, result in zip(plain, finish_plain([plans[i] for i in plain], [departures[i] for i in plain], ci)):
+        results[i] = result
+    for i, result in zip(others, thread_map(lambda k: finish_scene(plans[others[k]], departures[others[k]], ci),
+                                            len(others))):
+        results[i] = result
     wall_s = (time.perf_counter() - started) / len(results)
     for result in results:
         result.metrics = replace(result.metrics, wall_s=wall_s)

@@ -60,16 +60,20 @@ def estimate_cv(replicate_masses: np.ndarray, tray_width_m: float, bout_width_m:
     T trays centred on the axis (T odd), as `replicate_tray_masses` returns them.
     """
     masses = _replicate_rows(replicate_masses)
-    k = masses.shape[0]
     raw, cv, se, usable = _bout_cvs(masses, pattern.bout_tray_counts([bout_width_m], tray_width_m), driving)
-    if not np.isfinite(raw[0]):
+    return estimate_from(float(raw[0]), float(cv[0]), float(se[0]), bool(usable[0]), masses.shape[0])
+
+
+def estimate_from(raw: float, cv: float, se: float, usable: bool, replicates: int) -> CvEstimate:
+    """The `CvEstimate` of one width from `bout_cvs`' figures there, K = `replicates`."""
+    if not math.isfinite(raw):
         return CvEstimate(None, None, None, None)
-    if not usable[0]:  # one replicate, or one holds all the mass: no correction
-        return CvEstimate(float(raw[0]), None, float(raw[0]), None)
-    if k < MIN_REPLICATES_FOR_SE:
-        return CvEstimate(float(cv[0]), None, float(raw[0]), None)
-    half = _t_quantile(k - 1) * float(se[0])
-    return CvEstimate(float(cv[0]), float(se[0]), float(raw[0]), (max(0.0, float(cv[0]) - half), float(cv[0]) + half))
+    if not usable:  # one replicate, or one holds all the mass: no correction
+        return CvEstimate(raw, None, raw, None)
+    if replicates < MIN_REPLICATES_FOR_SE:
+        return CvEstimate(cv, None, raw, None)
+    half = _t_quantile(replicates - 1) * se
+    return CvEstimate(cv, se, raw, (max(0.0, cv - half), cv + half))
 
 
 @lru_cache(maxsize=None)
@@ -106,8 +110,13 @@ def cv_curve(replicate_masses: np.ndarray, tray_width_m: float, driving: str,
     counts = pattern.bout_tray_counts(widths_m, tray_width_m)
     if counts.size == 0:
         return np.zeros(0), np.zeros(0)
-    raw, cv, se, usable = _bout_cvs(masses, counts, driving)
-    with_se = usable & (masses.shape[0] >= MIN_REPLICATES_FOR_SE)
+    return curve_from(*_bout_cvs(masses, counts, driving), masses.shape[0])
+
+
+def curve_from(raw: np.ndarray, cv: np.ndarray, se: np.ndarray, usable: np.ndarray,
+               replicates: int) -> tuple[np.ndarray, np.ndarray]:
+    """`cv_curve`'s (CV, s.e.) from `bout_cvs`' figures at every width, K = `replicates`."""
+    with_se = usable & (replicates >= MIN_REPLICATES_FOR_SE)
     return np.where(usable, cv, raw), np.where(with_se, se, np.nan)
 
 

@@ -114,7 +114,7 @@ def _magnus_parameters(k_drag, diameter, density, spin, flight: Flight) -> tuple
     return np.stack([k_drag, lift, size * size]), np.ascontiguousarray(table)
 
 
-def _lift_acts(flight: Flight, spin: np.ndarray) -> bool:
+def lift_acts(flight: Flight, spin: np.ndarray) -> bool:
     """Whether the Magnus lift can move a landing point (else the drag-only model is exact)."""
     return bool(flight.magnus and flight.air_density_kg_m3 > 0 and flight.lift_coefficient_max > 0
                 and np.any(spin != 0))
@@ -133,6 +133,7 @@ def fly(
     atol: float = DEFAULT_ATOL,
     rtol: float = DEFAULT_RTOL,
     spin_rad_s=None,
+    lift: Optional[bool] = None,
 ) -> Landing:
     """Fly N granules from their launch state to the ground.
 
@@ -142,7 +143,10 @@ def fly(
     spin_rad_s (N,): spin about the vertical axis (ccw +), used with `flight.magnus`
     (None: no spin). dt_s None: adaptive Dormand-Prince 5(4) with per-granule steps
     (local error tolerances atol, rtol); a number: fixed-step RK4 with that step.
-    Granules launched at height 0 land at once (time 0, launch point).
+    Granules launched at height 0 land at once (time 0, launch point). `lift`: whether
+    the Magnus lift acts (None: `lift_acts` of these granules); a batch that flies a
+    run's granules in parts gives every part the run's own answer, so that each granule
+    lands as it does in the whole run.
     """
     pos, height, vel, diameter, density, spin = _check_inputs(
         position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2, spin_rad_s
@@ -152,7 +156,7 @@ def fly(
     if not (atol > 0 and rtol >= 0):
         raise ConfigError("flight.atol", f"tolerances must be atol > 0, rtol >= 0; got {atol}, {rtol}")
     k = drag_constant(diameter, density, flight)
-    lift = _lift_acts(flight, spin)
+    lift = lift_acts(flight, spin) if lift is None else bool(lift)
     if lift:
         par, table = _magnus_parameters(k, diameter, density, spin, flight)
     else:
@@ -182,6 +186,7 @@ def reference_landing(
     rtol: float = 1e-10,
     atol: float = 1e-12,
     spin_rad_s=None,
+    lift: Optional[bool] = None,
 ) -> Landing:
     """The same model solved one granule at a time with scipy's DOP853 and a
     terminal event at z = 0: slow, for tests and benchmarks. With Magnus lift the
@@ -228,7 +233,7 @@ def reference_landing(
             ds[4] += lift * cross[1]
         return ds + [float(magnus.spin_rate(w, d, rho_p, rho_air, mu))]
 
-    lifting = _lift_acts(flight, spin)
+    lifting = lift_acts(flight, spin)
     for i in range(n):
         if height[i] <= 0:
             continue

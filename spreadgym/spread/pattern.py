@@ -155,12 +155,9 @@ def collect_replicates(x_m, mass_kg, replicate, replicates: int, tray_width_m: f
     mass = np.asarray(mass_kg, dtype=float)
     if mass.shape != x.shape:  # one mass for all
         mass = np.broadcast_to(mass, x.shape)
-    half = float(min_half_width_m)
-    if not (np.isfinite(half) and half >= 0):
-        raise ConfigError("min_half_width_m", f"must be >= 0, got {min_half_width_m!r}")
     status, m, pooled, per_replicate, index = binning.bin_landings(
         x, mass, np.asarray(replicate, dtype=np.int64).reshape(-1), int(replicates), w,
-        max(0, int(np.ceil(half / w - 0.5 - _GRID_TOL))), MAX_TRAYS)
+        min_half_trays(min_half_width_m, w), MAX_TRAYS)
     if status == binning.BAD_POSITION:
         raise ConfigError("x_m", "landing positions must be finite")
     if status == binning.BAD_MASS:
@@ -172,7 +169,21 @@ def collect_replicates(x_m, mass_kg, replicate, replicates: int, tray_width_m: f
         count = 2 * int(max(reach, m)) + 1
         raise ConfigError("pattern.tray_width_m", f"the pattern spans {count * w:.0f} m, {count} trays of {w:g} m; "
                                                   f"allowed up to {MAX_TRAYS} trays (use wider trays)")
-    return Trays(center_m=np.arange(-m, m + 1) * w, mass_kg=pooled, width_m=w), per_replicate, index
+    return tray_row(pooled, m, w), per_replicate, index
+
+
+def min_half_trays(min_half_width_m: float, tray_width_m: float) -> int:
+    """The fewest trays either side of the centre tray that reach `min_half_width_m` (m)."""
+    half = float(min_half_width_m)
+    if not (np.isfinite(half) and half >= 0):
+        raise ConfigError("min_half_width_m", f"must be >= 0, got {min_half_width_m!r}")
+    return max(0, int(np.ceil(half / tray_width_m - 0.5 - _GRID_TOL)))
+
+
+def tray_row(mass_kg: np.ndarray, half_trays: int, tray_width_m: float) -> Trays:
+    """The row of 2 m + 1 trays of width w centred on the axis (m = `half_trays`) holding `mass_kg`."""
+    return Trays(center_m=np.arange(-half_trays, half_trays + 1) * tray_width_m, mass_kg=mass_kg,
+                 width_m=tray_width_m)
 
 
 def bout_tray_counts(widths_m, tray_width_m: float) -> np.ndarray:

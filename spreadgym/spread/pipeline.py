@@ -171,14 +171,42 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True,
         else:
             sample, lost_kg = rotations.copied_sample(throws, np.split(local_landing, np.cumsum(counts)[:-1]),
                                                      turns, parts, mirror)
-    p = scene.pattern
+    return scored(plan, throws, machine, flying, landing, sample, copies, copies_reason, lost_kg, ci)
+
+
+def scored(plan: ScenePlan, throws: list[discs.Throw], machine: discs.Throw, flying: np.ndarray,
+           landing: flight_model.Landing, sample: estimate.TraySample, copies: int, copies_reason: str,
+           lost_kg: list[float], ci: bool) -> SimulationResult:
+    """The run's trays, CV estimate, curve and metrics from what the trays caught
+    (`sample`); `throws` per disc, `machine` all discs in the machine frame, `flying` the
+    granules that fly and land (`landing`), `lost_kg` each disc's mass thrown onto the
+    other. The end of `finish_scene`, shared with `spread.plain_finish`."""
+    p = plan.scene.pattern
     trays, replicate_masses = estimate.replicate_tray_masses(
-        sample.x_m, sample.mass_kg, sample.replicate, int(granules.replicate.max()) + 1,
+        sample.x_m, sample.mass_kg, sample.replicate, int(machine.granules.replicate.max()) + 1,
         p.tray_width_m, min_half_width_m=p.target_swath_m)
     at_target = estimate.estimate_cv(replicate_masses, p.tray_width_m, p.target_swath_m, p.driving)
-    has_mass = trays.total_kg > 0.0
-    widths = pattern.default_widths_m(trays) if has_mass else np.zeros(0)
+    widths = curve_widths_m(trays)
     cvs, _ = estimate.cv_curve(replicate_masses, p.tray_width_m, p.driving, widths)
+    return result_of(plan, throws, machine, flying, landing, sample, copies, copies_reason, lost_kg, ci, trays,
+                     replicate_masses, at_target, widths, cvs)
+
+
+def curve_widths_m(trays: pattern.Trays) -> np.ndarray:
+    """The bout widths of a run's CV curve: `pattern.default_widths_m`, none where no mass landed."""
+    return pattern.default_widths_m(trays) if trays.total_kg > 0.0 else np.zeros(0)
+
+
+def result_of(plan: ScenePlan, throws: list[discs.Throw], machine: discs.Throw, flying: np.ndarray,
+              landing: flight_model.Landing, sample: estimate.TraySample, copies: int, copies_reason: str,
+              lost_kg: list[float], ci: bool, trays: pattern.Trays, replicate_masses: np.ndarray,
+              at_target: estimate.CvEstimate, widths: np.ndarray, cvs: np.ndarray) -> SimulationResult:
+    """The run's `SimulationResult` from its trays (`replicate_masses` (K, T) per replicate),
+    its CV estimate at the target swath and its CV curve (`cvs` at `widths`)."""
+    scene, chosen = plan.scene, plan.chosen
+    granules, departure, launch = machine.granules, machine.departure, machine.launch
+    p = scene.pattern
+    has_mass = widths.size > 0
     metrics = RunMetrics(
         model=chosen,
         model_reason=plan.reason,
@@ -203,7 +231,7 @@ def finish_scene(plan: ScenePlan, departures: list[Departure], ci: bool = True,
         released_kg=float(granules.mass_kg.sum()),
         retained_kg=float(granules.mass_kg[~departure.departed].sum()),
         intercepted_kg=float(sum(lost_kg)),
-        notes=_notes(scene, chosen, departure, launch, trays) + twin.interception_notes(throws, parts, lost_kg),
+        notes=_notes(scene, chosen, departure, launch, trays) + twin.interception_notes(throws, plan.parts, lost_kg),
         wall_s=0.0,
     )
     return SimulationResult(scene, granules, departure, launch, flying, landing, sample, trays, replicate_masses,
@@ -237,15 +265,21 @@ def _flight(launch: Departure, granules: GranuleBatch, flying: np.ndarray, disc_
     flying granules are a disc pair whose second half mirrors the first n, and without
     crosswind the mirrored granules land mirrored, to the bit (the flight's arithmetic is
     odd in x): only the first n fly."""
+    position, height, velocity3, spin = launch_columns(launch, flying, disc_height_m)
+    flown = int(flying.sum()) if mirrored_after is None else mirrored_after
+    landing = flight_model.fly(position[:flown], height[:flown], velocity3[:flown],
+                               granules.diameter_m[flying][:flown], granules.density_kg_m3, flight,
+                               spin_rad_s=spin[:flown])
+    return landing if mirrored_after is None else discs.mirrored_landing(landing)
+
+
+def launch_columns(launch: Departure, flying: np.ndarray, disc_height_m: np.ndarray) -> tuple[np.ndarray, ...]:
+    """What the flight takes of the `flying` granules' launch states: launch point (M, 2),
+    height above the ground (M,; the disc's height plus the granule's, never below 0),
+    velocity with its vertical part (M, 3) and spin (M,)."""
     velocity3 = np.column_stack([launch.velocity_m_s[flying], launch.vertical_velocity_m_s[flying]])
     height = np.maximum(disc_height_m[flying] + launch.height_m[flying], 0.0)
-    flown = int(flying.sum()) if mirrored_after is None else mirrored_after
-    landing = flight_model.fly(
-        launch.position_m[flying][:flown], height[:flown], velocity3[:flown],
-        granules.diameter_m[flying][:flown], granules.density_kg_m3, flight,
-        spin_rad_s=launch.spin_rad_s[flying][:flown],
-    )
-    return landing if mirrored_after is None else discs.mirrored_landing(landing)
+    return launch.position_m[flying], height, velocity3, launch.spin_rad_s[flying]
 
 
 def departure_summary(departure: Departure, omega_rad_s: float) -> dict:

@@ -54,7 +54,7 @@ from spreadgym.physics.compiled.plates import MAX_BOUNCES, near_plates, pack_pla
 from spreadgym.physics.constants import GRAVITY_M_S2, SPHERE_INERTIA_FACTOR
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.geometry import ZONE_MARGIN_M, advance_to_circle, zone_radius_m
-from spreadgym.physics.granules import GranuleBatch, pulled_back_by_clip
+from spreadgym.physics.granules import GranuleBatch, clip_test_radius_m
 from spreadgym.spread import von_mises
 from spreadgym.spread.discs import Disc, Throw
 from spreadgym.spread.estimate import TraySample
@@ -103,25 +103,53 @@ def copy_turns(granules: GranuleBatch, scene: Scene, copies: int, seed: int, fir
     `von_mises.fill_turns` gives them without forming an angle. `granules` holds the
     replicates first_replicate, first_replicate + 1, ... in order (each a consecutive run
     of granules), `granules.replicate` 0, 1, ..."""
-    n = granules.count
     if copies == 1:
-        return Turn(np.ones(n), np.zeros(n), 1)
+        return Turn(np.ones(granules.count), np.zeros(granules.count), 1)
+    return drawn_turns(granules.replicate, TurnLaws.of(granules.release_xy_m, [scene], [granules.count]), copies,
+                       seed, first_replicate)
+
+
+@dataclasses.dataclass(frozen=True)
+class TurnLaws:
+    """The von Mises law of each granule's turn, for granules of one or more scenes side
+    by side: cos and sin of its mean theta0 - theta, its concentration r r0 / sigma^2, and
+    whether the clip pulled its release point back (its turn is then 0)."""
+
+    cos_mu: np.ndarray
+    sin_mu: np.ndarray
+    kappa: np.ndarray
+    held: np.ndarray  # bool
+
+    @staticmethod
+    def of(release_xy_m: np.ndarray, scenes: Sequence[Scene], counts: Sequence[int]) -> "TurnLaws":
+        """The laws of `counts[d]` granules of each scene d in turn (release points (N, 2),
+        disc frame): one numpy pass for all of them, each scene's constants repeated."""
+        xy = release_xy_m
+        r = np.hypot(xy[:, 0], xy[:, 1])
+        to_feed = np.repeat([s.feed.angle_rad for s in scenes], counts) - np.arctan2(xy[:, 1], xy[:, 0])
+        kappa = r * np.repeat([s.feed.radius_m for s in scenes], counts) / np.repeat(
+            [s.feed.spread_m**2 for s in scenes], counts)
+        held = ~(r < np.repeat([clip_test_radius_m(s) for s in scenes], counts))
+        return TurnLaws(np.cos(to_feed), np.sin(to_feed), kappa, held)
+
+    def part(self, start: int, stop: int) -> "TurnLaws":
+        return TurnLaws(*(a[start:stop] for a in (self.cos_mu, self.sin_mu, self.kappa, self.held)))
+
+
+def drawn_turns(replicate: np.ndarray, laws: TurnLaws, copies: int, seed: int, first_replicate: int) -> Turn:
+    """`copy_turns` of granules in replicates `replicate` (0, 1, ... in consecutive runs)
+    whose turns follow `laws`. Each replicate draws from its own stream (seed,
+    first_replicate + replicate, COPY_STREAM), so the turns are the same however the
+    granules were batched."""
+    n = replicate.size
     # rows 1.. are filled for every granule below (each is in one replicate); row 0 is s = 0
     cos_turn, sin_turn = np.empty((copies, n)), np.empty((copies, n))
     cos_turn[0], sin_turn[0] = 1.0, 0.0
-    feed = scene.feed
-    xy = granules.release_xy_m
-    r = np.hypot(xy[:, 0], xy[:, 1])
-    to_feed = feed.angle_rad - np.arctan2(xy[:, 1], xy[:, 0])  # the mean of s
-    cos_mu, sin_mu = np.cos(to_feed), np.sin(to_feed)
-    kappa = r * feed.radius_m / feed.spread_m**2
-    # the replicates are consecutive runs of granules, each with its own stream
-    starts = np.flatnonzero(np.diff(granules.replicate, prepend=-1))
+    starts = np.flatnonzero(np.diff(replicate, prepend=-1))
     stops = np.append(starts[1:], n)
-    seeds = [(seed, first_replicate + int(granules.replicate[start]), COPY_STREAM) for start in starts]
-    von_mises.fill_turns(seeds, starts, stops, kappa, cos_mu, sin_mu, cos_turn, sin_turn)
-    # a point pulled back by the clip keeps its angle (s = 0)
-    held = np.flatnonzero(pulled_back_by_clip(xy, scene))
+    seeds = [(seed, first_replicate + int(replicate[start]), COPY_STREAM) for start in starts]
+    von_mises.fill_turns(seeds, starts, stops, laws.kappa, laws.cos_mu, laws.sin_mu, cos_turn, sin_turn)
+    held = np.flatnonzero(laws.held)  # a point pulled back by the clip keeps its angle (s = 0)
     if held.size:
         cos_turn[:, held], sin_turn[:, held] = 1.0, 0.0
     return Turn(cos_turn.ravel(), sin_turn.ravel(), copies)
