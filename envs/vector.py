@@ -19,9 +19,11 @@ side on spreadgym.threads' threads), with the same bits as one run each; each su
 hidden batches run together, in one library holding every episode's fertilizer copy.
 docs/benchmark.md has every rung's rates.
 
-Size: `num_envs` x the landing points of one run (sim.granules x sim.angle_copies x
-discs) is bounded by the budget `spreadgym simulate` has (MAX_GRANULE_COPIES): one step
-holds every sub-env's result at once.
+Size: any `num_envs`. A step runs its designs in batches of at most MAX_GRANULE_COPIES
+landing points (sim.granules x sim.angle_copies x discs per design: `spreadgym simulate`'s
+budget for one run), each batch when the first of its sub-envs steps, so a step never
+holds more than one batch's results beyond what the sub-envs keep (each its last result,
+for `render`, until its next reset).
 
 Autoreset (`autoreset_mode`): "next_step" (gymnasium's default: the step after an
 episode's end resets that sub-env and ignores its action), "same_step" (the sub-env is
@@ -41,10 +43,13 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from spreadgym.config.scene import check_pooled_work
+from spreadgym.config.scene import MAX_GRANULE_COPIES, granule_copies
 from spreadgym.envs.common.task import batches_library
 from spreadgym.envs.spinner_design import SpinnerDesignEnv
 from spreadgym.errors import ConfigError
+
+MAX_NUM_ENVS = 65536
+"""Sub-envs one vector env may hold (each a shallow copy of the first, with its own state)."""
 
 MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP,
          "disabled": AutoresetMode.DISABLED}
@@ -58,8 +63,9 @@ class SpinnerDesignVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, autoreset_mode: str | AutoresetMode = "next_step",
                  render_mode: Optional[str] = None, **kwargs: Any):
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ConfigError("num_envs", f"expected an integer >= 1, got {num_envs!r}")
+        if (isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer))
+                or not 1 <= num_envs <= MAX_NUM_ENVS):
+            raise ConfigError("num_envs", f"expected an integer from 1 to {MAX_NUM_ENVS}, got {num_envs!r}")
         mode = autoreset_mode.name.lower() if isinstance(autoreset_mode, AutoresetMode) else autoreset_mode
         if mode not in MODES:
             raise ConfigError("autoreset_mode", f"unknown {autoreset_mode!r}; allowed: {sorted(MODES)}")
@@ -67,7 +73,6 @@ class SpinnerDesignVectorEnv(VectorEnv):
             raise ConfigError("render_mode", f"unknown {render_mode!r}; the vector env renders rgb_array "
                                              "(a tuple of frames, one per sub-env)")
         first = SpinnerDesignEnv(render_mode=render_mode, **kwargs)
-        check_pooled_work(first.task.base_scene, int(num_envs), "num_envs")  # before N sub-envs exist
         self.envs = [first] + [_sharing_task(first) for _ in range(int(num_envs) - 1)]
         self.num_envs = int(num_envs)
         self.metadata = {**self.metadata, "autoreset_mode": MODES[mode]}
@@ -164,9 +169,10 @@ class SpinnerDesignVectorEnv(VectorEnv):
         return tuple(env.render() for env in self.envs)
 
     def _run_designs(self, actions: np.ndarray) -> None:
-        """The tray tests of every sub-env that steps now, as one batch: the scene each
-        sub-env's `step` will ask for (its action checked as `step` checks it), run
-        together; the shared task then hands each sub-env its result in turn."""
+        """The tray tests of every sub-env that steps now, in batches: the scene each
+        sub-env's `step` will ask for (its action checked as `step` checks it); the shared
+        task then hands each sub-env its result in turn, running each batch when its first
+        sub-env asks (`_Prefetched`)."""
         task = self.task
         stepping = [i for i, env in enumerate(self.envs)
                     if not self._autoreset[i] and env._context is not None]  # one that needs a reset fails in step
@@ -174,8 +180,7 @@ class SpinnerDesignVectorEnv(VectorEnv):
         if not batched(self.envs[0]) or library is None:
             return
         scenes = [self.envs[i].design_scene(actions[i])[0] for i in stepping]
-        results = task.run_batch(scenes, library)
-        task.run = _Prefetched(scenes, results)  # step() below takes them; then Task.run again
+        task.run = _Prefetched(scenes, lambda part: task.run_batch(part, library))  # step() takes them; then Task.run
 
     def close_extras(self, **kwargs: Any):
         for env in getattr(self, "envs", []):  # also for an instance whose __init__ raised
@@ -183,17 +188,34 @@ class SpinnerDesignVectorEnv(VectorEnv):
 
 
 class _Prefetched:
-    """A task's `run` for one vector step: the batch's results in order, each for the
-    scene it was computed for (checked)."""
+    """A task's `run` for one vector step: the results of `scenes` in order, each for the
+    scene it was computed for (checked), computed by `run_batch` in parts of at most
+    MAX_GRANULE_COPIES landing points, each when the first of its scenes is asked for."""
 
-    def __init__(self, scenes: list, results: list) -> None:
-        self.pending = list(zip(scenes, results))
+    def __init__(self, scenes: list, run_batch) -> None:
+        self.scenes, self.run_batch = list(scenes), run_batch
+        self.results: list = []
 
     def __call__(self, scene, rendering: bool = False, batch=None):
-        expected, result = self.pending.pop(0)
+        if not self.results:
+            part = _part_size(self.scenes)
+            self.results = list(self.run_batch(self.scenes[:part]))
+        expected, result = self.scenes.pop(0), self.results.pop(0)
         if rendering or scene != expected:  # a hidden batch is in the scene (its fertilizer copy, its contacts)
             raise RuntimeError("the vector env's batch and its sub-envs' steps disagree")
         return result
+
+
+def _part_size(scenes: list) -> int:
+    """How many of `scenes`, from the first, one batch runs: the scenes shared out evenly
+    over the fewest batches of at most MAX_GRANULE_COPIES landing points each (and at least
+    one scene per batch)."""
+    copies = [granule_copies(scene) for scene in scenes]
+    parts = -(-sum(copies) // MAX_GRANULE_COPIES)
+    size = -(-len(scenes) // max(parts, 1))
+    while size > 1 and sum(copies[:size]) > MAX_GRANULE_COPIES:
+        size -= 1
+    return size
 
 
 def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], actions: list) -> list[tuple]:
@@ -215,8 +237,7 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
     library = batches_library(task.library, batches)
     if library is None:
         return _one_by_one(env, resets, actions)
-    results = task.run_batch(scenes, library)
-    task.run = _Prefetched(scenes, results)
+    task.run = _Prefetched(scenes, lambda part: task.run_batch(part, library))
     try:
         steps = []
         for (seed, options), action in zip(resets, actions):

@@ -318,17 +318,37 @@ def test_the_robust_rung_runs_its_hidden_batches_as_one_batch_with_the_single_en
     assert [step[1] for step in batch] == singles
 
 
-def test_num_envs_is_bounded_by_the_landing_point_budget():
-    from spreadgym.config.scene import MAX_GRANULE_COPIES
+def test_a_step_beyond_the_landing_point_budget_runs_in_parts_with_the_single_envs_results(monkeypatch):
+    from spreadgym.envs import vector
 
     per_run = 48 * 32  # granules x release-angle copies
-    most = MAX_GRANULE_COPIES // per_run
-    with pytest.raises(ConfigError) as err:
-        gym.make_vec("spreadgym/SpinnerDesign-v1", num_envs=most + 1, **SMALL)
-    assert str(err.value).startswith("num_envs:") and str(MAX_GRANULE_COPIES) in str(err.value)
-    assert "\n" not in str(err.value)
-    with pytest.raises(ConfigError, match="num_envs"):
-        gym.make_vec("spreadgym/SpinnerDesign-v1", num_envs=10**6)  # refused before a million sub-envs exist
+    monkeypatch.setattr(vector, "MAX_GRANULE_COPIES", 3 * per_run)  # at most 3 sub-envs a part
+    sizes = []
+    venv = gym.make_vec("spreadgym/SpinnerDesign-v1", num_envs=7, autoreset_mode="same_step", **SMALL)
+    task = venv.unwrapped.task
+    original = type(task).run_batch
+    monkeypatch.setattr(type(task), "run_batch", lambda self, scenes, library=None: (
+        sizes.append(len(scenes)), original(self, scenes, library))[1])
+    venv.reset(seed=40)
+    venv.action_space.seed(2)
+    actions = venv.action_space.sample()
+    _, rewards, *_ = venv.step(actions)
+    assert sizes == [3, 2, 2]  # shared out evenly over the fewest parts
+    env = gym.make("spreadgym/SpinnerDesign-v1", **SMALL)
+    singles = []
+    for i in range(7):
+        env.reset(seed=40 + i)
+        singles.append(env.step(actions[i])[1])
+    assert list(rewards) == singles
+
+
+def test_num_envs_beyond_its_bound_is_a_one_line_error():
+    from spreadgym.envs.vector import MAX_NUM_ENVS
+
+    for bad in (MAX_NUM_ENVS + 1, 10**9, 0, 2.5, True):
+        with pytest.raises(ConfigError) as err:
+            gym.make_vec("spreadgym/SpinnerDesign-v1", num_envs=bad, **SMALL)  # refused before any sub-env exists
+        assert str(err.value).startswith("num_envs:") and "\n" not in str(err.value)
 
 
 # -- RecordVideo ------------------------------------------------------------------------------------
