@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# One measuring call on a lent 16-core GPU machine (spreadgym/studies/device_check.py says
+# what it measures). Run from the repository root, with the wheels of the packages that
+# machine lacks in .whl/ (carried: pydantic, gymnasium, pymunk, cma and their needs):
+#   bash spreadgym/studies/device_check.sh [driver options, e.g. --quick]
+# It installs the wheels and this repository into $SITE (default /tmp/site) without the
+# network, prints the versions and the GPUs, then runs the driver; everything goes to
+# $OUT (the device tool's folder; default out/device-check), device_check.log included.
+# PYTHON (default python3), SITE and LIMIT (the driver's hard stop, s; default 450) can be set.
+set -u
+export PYTHONUNBUFFERED=1
+PY=${PYTHON:-python3}
+SITE=${SITE:-/tmp/site}
+OUT=${OUT:-$PWD/out/device-check}
+mkdir -p "$OUT"
+start=$(date +%s)
+{
+  if [ -d .whl ]; then
+    $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" .whl/*.whl \
+      || echo "!! wheel install failed"
+  fi
+  # the repository as pyproject maps it (envs/ -> spreadgym.envs, agents/ -> spreadgym.agents, configs/ -> spreadgym.configs)
+  if ! $PY -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --no-cache-dir --upgrade \
+      --target "$SITE" . ; then
+    echo "!! pip could not install the repository: copying its packages into $SITE instead"
+    rm -rf "$SITE/spreadgym" && cp -r spreadgym "$SITE/" && cp -r envs "$SITE/spreadgym/envs" \
+      && cp -r agents "$SITE/spreadgym/agents" && cp -r configs "$SITE/spreadgym/configs"
+  fi
+  export PYTHONPATH=$SITE${PYTHONPATH:+:$PYTHONPATH}
+  if [ -z "${CUDA_HOME:-}" ] && [ -d /usr/local/cuda ]; then export CUDA_HOME=/usr/local/cuda; fi
+  echo "installed in $(( $(date +%s) - start )) s; nproc $(nproc); CUDA_HOME=${CUDA_HOME:-unset}"
+  $PY -c 'import sys, numpy, numba; print("python", sys.version.split()[0], "numpy", numpy.__version__, "numba", numba.__version__)'
+  $PY -c 'import importlib.metadata as m; print("numba-cuda", m.version("numba-cuda"))' 2>/dev/null \
+    || echo "numba-cuda: not installed"
+  nvidia-smi -L 2>/dev/null || echo "nvidia-smi: none"
+  echo "libnvvm: $(ls /usr/local/cuda*/nvvm/lib64/libnvvm.so* 2>/dev/null | head -2 | tr '\n' ' ')"
+  timeout -k 15 "${LIMIT:-450}" $PY -P -m spreadgym.studies.device_check --out "$OUT" "$@"
+  rc=$?
+  echo "device_check.sh: $(( $(date +%s) - start )) s in all (driver exit $rc)"
+} 2>&1 | tee "$OUT/device_check.log"
