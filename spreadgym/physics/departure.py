@@ -55,7 +55,7 @@ class Departure:
         mean angle from the tangent (deg: 0 tangential, 90 radial, `radial_tangential_m_s`),
         mean time on the spinner) over the departed granules, in one compiled pass (NaN
         means where none departed)."""
-        return _means(self.position_m, self.velocity_m_s, self.spin_rad_s, self.time_s, self.departed,
+        return means_of(self.position_m, self.velocity_m_s, self.spin_rad_s, self.time_s, self.departed,
                       math.copysign(1.0, omega_rad_s))
 
     def outcome_counts(self) -> dict[str, int]:
@@ -114,7 +114,7 @@ def _radial_tangential(position, velocity, departed, sign):
 
 
 @KERNEL
-def _means(position, velocity, spin, time, departed, sign):
+def means_of(position, velocity, spin, time, departed, sign):
     n = 0
     speed = spin_sum = angle = time_sum = 0.0
     for i in range(departed.size):

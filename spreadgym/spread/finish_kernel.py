@@ -4,9 +4,10 @@ trays and the CV estimate of every design, designs side by side on numba's threa
 `finish_designs` runs, for each design, the kernels `pipeline.finish_scene` calls one
 by one with numpy and Python between them: `von_mises.antithetic_turns` (the copies'
 turns), `rotations.turned_copies` (where each copy lands across the track),
-`binning.bin_landings` (the trays) and `estimate.bout_cvs` (the CV at the target and the
-CV curve), with the glue between them in the same arithmetic, so every figure is the
-same bits (spreadgym.spread.plain_finish holds the rest and the tests).
+`binning.bin_landings` (the trays), `estimate.bout_cvs` (the CV at the target and the
+CV curve) and `departure.means_of` (the departure summary), with the glue between them in
+the same arithmetic, so every figure is the same bits (spreadgym.spread.plain_finish
+holds the rest and the tests).
 
 The outputs are flat arrays, each design's part at offsets the caller gives: the copies'
 sample (`sample_first`), the trays (`tray_first`: room for `tray_room` trays, at least
@@ -19,6 +20,7 @@ import numpy as np
 from numba import prange
 
 from spreadgym.physics.compiled.options import KERNEL, PARALLEL
+from spreadgym.physics.departure import means_of
 from spreadgym.spread.binning import OK, bin_landings
 from spreadgym.spread.estimate import bout_cvs
 from spreadgym.spread.rotations import turned_copies
@@ -65,7 +67,8 @@ def fold_pairs(tray_count, counts, racetrack):
 def finish_designs(first, copies, run_first, run_start, run_stop, states, kappa, cos_mu, sin_mu, held, departed,
                    flown_first, landing, mass, replicate, replicates, sample_first, out_x, out_mass, out_replicate,
                    width, min_half_trays, max_trays, tray_first, tray_room, masses_first, out_pooled,
-                   out_per_replicate, target_trays, racetrack, out_status, out_half_trays, out_target, out_curve):
+                   out_per_replicate, target_trays, racetrack, out_status, out_half_trays, out_target, out_curve,
+                   position, velocity, spin, time, sign, out_means):
     """Design d's granules are first[d]..first[d + 1] - 1 of the granule columns (`kappa`,
     `cos_mu`, `sin_mu`, `held`: `rotations.TurnLaws`; `departed`, `mass`, `replicate`);
     its departed ones landed at `landing` rows flown_first[d].. (disc frame, m); its
@@ -76,9 +79,15 @@ def finish_designs(first, copies, run_first, run_start, run_stop, states, kappa,
     out_status), its (raw, corrected, s.e.,
     usable) at the target's bout of target_trays[d] trays (out_target[d]) and at every
     curve width of 1..2 r + 1 trays, r the reach of the loaded trays (out_curve rows from
-    tray_first[d]; none where nothing landed)."""
+    tray_first[d]; none where nothing landed); and `Departure.means` of its departures
+    (`position`, `velocity`, `spin`, `time` granule columns; `sign` the sense of its
+    rotation) in out_means[d] (the count as a float)."""
     for d in prange(first.size - 1):
         a, n, k = first[d], first[d + 1] - first[d], copies[d]
+        count, speed, speed_sd, spin_mean, angle, time_mean = means_of(
+            position[a:a + n], velocity[a:a + n], spin[a:a + n], time[a:a + n], departed[a:a + n], sign[d])
+        out_means[d, 0], out_means[d, 1], out_means[d, 2] = count, speed, speed_sd
+        out_means[d, 3], out_means[d, 4], out_means[d, 5] = spin_mean, angle, time_mean
         cos = np.empty(k * n)
         sin = np.empty(k * n)
         cos_rows, sin_rows = cos.reshape((k, n)), sin.reshape((k, n))

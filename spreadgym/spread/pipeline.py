@@ -200,9 +200,11 @@ def curve_widths_m(trays: pattern.Trays) -> np.ndarray:
 def result_of(plan: ScenePlan, throws: list[discs.Throw], machine: discs.Throw, flying: np.ndarray,
               landing: flight_model.Landing, sample: estimate.TraySample, copies: int, copies_reason: str,
               lost_kg: list[float], ci: bool, trays: pattern.Trays, replicate_masses: np.ndarray,
-              at_target: estimate.CvEstimate, widths: np.ndarray, cvs: np.ndarray) -> SimulationResult:
+              at_target: estimate.CvEstimate, widths: np.ndarray, cvs: np.ndarray,
+              departure_means: Optional[tuple] = None) -> SimulationResult:
     """The run's `SimulationResult` from its trays (`replicate_masses` (K, T) per replicate),
-    its CV estimate at the target swath and its CV curve (`cvs` at `widths`)."""
+    its CV estimate at the target swath and its CV curve (`cvs` at `widths`);
+    `departure_means`: the first disc's `Departure.means`, where already computed."""
     scene, chosen = plan.scene, plan.chosen
     granules, departure, launch = machine.granules, machine.departure, machine.launch
     p = scene.pattern
@@ -215,7 +217,7 @@ def result_of(plan: ScenePlan, throws: list[discs.Throw], machine: discs.Throw, 
         angle_copies=copies,
         angle_copies_reason=copies_reason,
         outcomes=departure.outcome_counts(),
-        departure=departure_summary(throws[0].departure, scene.spinner.omega_rad_s),
+        departure=departure_summary(throws[0].departure, scene.spinner.omega_rad_s, departure_means),
         target_swath_m=p.target_swath_m,
         driving=p.driving,
         tray_width_m=p.tray_width_m,
@@ -282,13 +284,14 @@ def launch_columns(launch: Departure, flying: np.ndarray, disc_height_m: np.ndar
     return launch.position_m[flying], height, velocity3, launch.spin_rad_s[flying]
 
 
-def departure_summary(departure: Departure, omega_rad_s: float) -> dict:
-    """Means over departed granules: speed, spin, angle from the tangent, time on the spinner.
+def departure_summary(departure: Departure, omega_rad_s: float, means: Optional[tuple] = None) -> dict:
+    """Means over departed granules: speed, spin, angle from the tangent, time on the spinner
+    (`means`: `departure.means(omega_rad_s)`, where already computed).
 
     The departure angle is measured from the disc's tangent at the departure point
     (direction of rotation) towards the outward radial: 0 deg tangential, 90 deg radial.
     """
-    count, speed, speed_sd, spin, angle, time_s = departure.means(omega_rad_s)
+    count, speed, speed_sd, spin, angle, time_s = departure.means(omega_rad_s) if means is None else means
     if not count:
         return {"speed_mean_m_s": None, "speed_std_m_s": None, "spin_mean_rad_s": None,
                 "angle_mean_deg": None, "time_on_spinner_mean_s": None}  # nothing to average

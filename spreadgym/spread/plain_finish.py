@@ -28,6 +28,7 @@ allowed) goes through `finish_scene` itself, which also gives its error.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from typing import Sequence
 
@@ -96,12 +97,15 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
     status, half_trays = np.empty(len(plans), dtype=np.int64), np.empty(len(plans), dtype=np.int64)
     target, curve = np.empty((len(plans), 4)), np.empty((tray_first[-1], 4))
     target_trays = np.array([_target_trays(scene.pattern.target_swath_m, w) for scene, w in zip(scenes, width)])
+    means = np.empty((len(plans), 6))
+    sense = np.array([math.copysign(1.0, scene.spinner.omega_rad_s) for scene in scenes])
     with threads.numba_threads():
         finish_designs(first, copies, *runs, laws.kappa, laws.cos_mu, laws.sin_mu, laws.held, departed, flown_first,
                        landing_xy, g.mass_kg, g.replicate, replicates, sample_first, out_x, out_mass, out_replicate,
                        width, min_half, pattern.MAX_TRAYS, tray_first, room, masses_first, out_pooled, out_masses,
                        target_trays, np.array([scene.pattern.driving == "racetrack" for scene in scenes]), status,
-                       half_trays, target, curve)
+                       half_trays, target, curve, every.departure.position_m, every.departure.velocity_m_s,
+                       every.departure.spin_rad_s, every.departure.time_s, sense, means)
     numpy_turns = np.logical_or.reduceat(laws.kappa > LARGE_KAPPA, first[:-1])  # `von_mises.fill_turns`' own case
     landing_xy += 0.0  # the disc's axis (at 0) added, as the pipeline adds it
 
@@ -123,7 +127,8 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
         results.append(result_of(
             plan, [throw], throw, flying, flight_model.Landing(landing_xy[flights], landing_t[flights]),
             estimate.TraySample(out_x[samples], out_mass[samples], out_replicate[samples]), int(copies[d]),
-            rotations.copies_for(plan.scene)[1], [0.0], ci, trays, masses, at_target, widths, cvs))
+            rotations.copies_for(plan.scene)[1], [0.0], ci, trays, masses, at_target, widths, cvs,
+            (int(means[d, 0]), *(float(v) for v in means[d, 1:]))))
     return results
 
 

@@ -18,7 +18,11 @@ GPU: numba-cuda 0.30.4 compiles it for sm_90 (H100/H200) from these sources as t
 from __future__ import annotations
 
 import numpy as np
-from numba import config, cuda, float64
+
+if not hasattr(np, "row_stack"):  # numba-cuda 0.30 registers np.row_stack (an alias of vstack, gone in numpy 2.5)
+    np.row_stack = np.vstack  # as it loads its target: without it no kernel compiles (seen on numpy 2.5.2)
+
+from numba import config, cuda, float64  # noqa: E402 (after the alias above)
 
 from spreadgym.physics.compiled import face_motion, granule_run
 
