@@ -342,6 +342,33 @@ def test_a_step_beyond_the_landing_point_budget_runs_in_parts_with_the_single_en
     assert list(rewards) == singles
 
 
+def test_an_error_in_a_later_part_reaches_the_step_and_leaves_no_thread(monkeypatch):
+    import threading
+
+    from spreadgym.envs import vector
+
+    monkeypatch.setattr(vector, "MAX_GRANULE_COPIES", 2 * 48 * 32)  # parts of 2 sub-envs
+    venv = gym.make_vec("spreadgym/SpinnerDesign-v1", num_envs=5, autoreset_mode="same_step", **SMALL)
+    task = venv.unwrapped.task
+    original, calls = type(task).run_batch, []
+
+    def failing_second(self, scenes, library=None):
+        calls.append(len(scenes))
+        if len(calls) == 2:
+            raise RuntimeError("the second part failed")
+        return original(self, scenes, library)
+
+    monkeypatch.setattr(type(task), "run_batch", failing_second)
+    venv.reset(seed=3)
+    before = threading.active_count()
+    with pytest.raises(RuntimeError, match="the second part failed"):
+        venv.step(venv.action_space.sample())
+    assert threading.active_count() <= before and "run" not in task.__dict__
+    monkeypatch.setattr(type(task), "run_batch", original)
+    venv.reset(seed=3)
+    venv.step(venv.action_space.sample())  # the env works on
+
+
 def test_num_envs_beyond_its_bound_is_a_one_line_error():
     from spreadgym.envs.vector import MAX_NUM_ENVS
 
