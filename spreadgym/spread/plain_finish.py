@@ -52,8 +52,10 @@ from spreadgym.spread.pipeline import (
 from spreadgym.spread.von_mises import LARGE_KAPPA
 
 PART_GRANULES = 4096
-"""Departed granules per part of the flight stage (about 1 ms of flight): small enough that
-the parts share out over the threads, large enough that a part's call costs little."""
+"""Departed granules per part of the flight stage at most (about 2 ms of flight); a batch
+has at least PARTS_PER_THREAD parts per thread, so that the parts share out evenly."""
+PARTS_PER_THREAD = 4
+SMALLEST_PART = 256  # granules: a part's call and checks cost about what 20 granules' flights do
 
 
 def is_plain(plan: ScenePlan) -> bool:
@@ -188,11 +190,12 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
             kinds.append(kind := (scene.flight, lift, []))
         kind[2].append(d)
     parts = []  # (flight, lift, granule rows: a slice or indices)
+    step = int(np.clip(-(-owner.size // (PARTS_PER_THREAD * threads.thread_count())), SMALLEST_PART, PART_GRANULES))
     for flight, lift, members in kinds:
         rows = np.flatnonzero(np.isin(owner, members)) if len(kinds) > 1 else None
         size = owner.size if rows is None else rows.size
-        for a in range(0, size, PART_GRANULES):
-            b = min(a + PART_GRANULES, size)
+        for a in range(0, size, step):
+            b = min(a + step, size)
             parts.append((flight, lift, slice(a, b) if rows is None else rows[a:b]))
     landing_xy, landing_t = np.empty((owner.size, 2)), np.empty(owner.size)
 
