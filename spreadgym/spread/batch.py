@@ -8,12 +8,13 @@ problems. The stages:
   2. every disc of every scene through its spinner model at once: the compiled model runs
      all granules in one parallel kernel (`prange` over the flat (design x disc x granule)
      index; a twin machine is simply two discs in that index);
-  3. finish each scene (cone, plates, release-angle copies, flight, trays, metrics;
-     `pipeline.finish_scene`).
-Stage 3 runs scenes side by side in a pool of threads (its compiled kernels release the
-GIL, so one scene's Python overlaps another's kernels). Every stage computes
-each scene exactly as `run_scene` does, so no result depends on the batch or on the
-thread count (spreadgym.threads decides the count).
+  3. finish the plain designs (one disc, no plates, release-angle copies) together, a few
+     compiled calls for all of them (`plain_finish.finish_plain`), and every other scene
+     (cone, plates, copies, flight, trays, metrics; `pipeline.finish_scene`) side by side
+     in a pool of threads (its compiled kernels release the GIL, so one scene's Python
+     overlaps another's kernels).
+Every stage computes each scene exactly as `run_scene` does, so no result depends on the
+batch or on the thread count (spreadgym.threads decides the count).
 
 The interface holds scenes and returns `SimulationResult`s; where the arrays of stage 2
 live is the spinner model's business (`SpinnerModel.batch_runner`), which leaves room for

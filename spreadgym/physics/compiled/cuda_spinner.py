@@ -10,9 +10,10 @@ compiler fuses multiply-adds); under numba's CUDA simulator (NUMBA_ENABLE_CUDASI
 the kernel runs the CPU code itself and the results are the CPU's bits.
 
 Imported only when the device is "cuda" (spreadgym.device); numba's CUDA target then
-compiles the kernel at the first launch and caches it next to this file. Checked without a
-GPU: numba-cuda 0.30.4 compiles it for sm_90 (H100/H200) from these sources as they are
-(4454 lines of PTX, 384 fused multiply-adds); it has not run on a GPU yet (docs/performance.md).
+compiles the kernel at the first launch and caches it next to this file. On an H200
+(numba-cuda 0.30.4, sm_90) it compiled in 39 s and matched the CPU on 155 648 granules of
+72 designs: the same outcomes, departures within 6e-12 m/s, the same tray masses to the
+bit (docs/performance.md, the CUDA backend).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from spreadgym.physics.compiled import face_motion, granule_run
 
 SCRATCH = (2, face_motion.EVENTS)  # a module constant: numba.cuda sizes local arrays from constants only
 THREADS_PER_BLOCK = 64
-"""Granules per block; not tuned (no GPU was at hand to measure it on)."""
+"""Granules per block: 32 to 256 ran within 10 % of each other on an H200 (docs/performance.md)."""
 
 
 if config.ENABLE_CUDASIM:
