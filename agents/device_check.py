@@ -1,6 +1,6 @@
 """One measuring run for a lent 16-core machine with an NVIDIA GPU (the device tool's
 `nvidia-h100-x1` / `nvidia-h200`): CPU scaling of the batch paths and the CUDA spinner
-against the CPU, in one call of a few minutes. Run through `spreadgym/studies/device_check.sh`,
+against the CPU, in one call of a few minutes. Run through `agents/device_check.sh`,
 which installs the carried wheels and this repository into /tmp/site first; never run by
 the tests or `make bench`.
 
@@ -502,7 +502,7 @@ def stage_row(n: int, args, papers, library, reference: dict, table: Table, unti
 def start_gpu_process(args) -> Optional[subprocess.Popen]:
     """The GPU process (this module, --role gpu), started now so that its compile overlaps
     the CPU series; it shares this process's clock, output folder and flag folder."""
-    command = [sys.executable, "-P", "-m", "spreadgym.studies.device_check", "--role", "gpu", "--t0", str(CLOCK.t0),
+    command = [sys.executable, "-P", "-m", "spreadgym.agents.device_check", "--role", "gpu", "--t0", str(CLOCK.t0),
                "--deadline-s", str(CLOCK.deadline_s), "--out", args.out, "--work", args.work]
     command += ["--quick"] if args.quick else []
     command += ["--gpu-sim"] if args.gpu_sim else []

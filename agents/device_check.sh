@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# One measuring call on a lent 16-core GPU machine (spreadgym/studies/device_check.py says
+# One measuring call on a lent 16-core GPU machine (agents/device_check.py says
 # what it measures). Run from the repository root, with the wheels of the packages that
 # machine lacks in .whl/ (carried: pydantic, gymnasium, pymunk, cma and their needs):
-#   bash spreadgym/studies/device_check.sh [driver options, e.g. --quick]
+#   bash agents/device_check.sh [driver options, e.g. --quick]
 # It installs the wheels and this repository into $SITE (default /tmp/site) without the
 # network, prints the versions and the GPUs, then runs the driver; everything goes to
 # $OUT (the device tool's folder; default out/device-check), device_check.log included.
@@ -34,7 +34,7 @@ start=$(date +%s)
     || echo "numba-cuda: not installed"
   nvidia-smi -L 2>/dev/null || echo "nvidia-smi: none"
   echo "libnvvm: $(ls /usr/local/cuda*/nvvm/lib64/libnvvm.so* 2>/dev/null | head -2 | tr '\n' ' ')"
-  timeout -k 15 "${LIMIT:-450}" $PY -P -m spreadgym.studies.device_check --out "$OUT" "$@"
+  timeout -k 15 "${LIMIT:-450}" $PY -P -m spreadgym.agents.device_check --out "$OUT" "$@"
   rc=$?
   echo "device_check.sh: $(( $(date +%s) - start )) s in all (driver exit $rc)"
 } 2>&1 | tee "$OUT/device_check.log"
