@@ -309,10 +309,7 @@ def test_the_robust_rung_runs_its_hidden_batches_as_one_batch_with_the_single_en
     actions = np.random.default_rng(1).uniform(-1, 1, (3, 2)).astype(np.float32)
     _, rewards, *_ = venv.step(actions)
     env = gym.make("spreadgym/SpinnerDesignRobust-v1", **SMALL)
-    singles = []
-    for i in range(3):
-        env.reset(seed=20 + i)
-        singles.append(env.step(actions[i])[1])
+    singles = _single_rewards(env, 20, actions)
     assert list(rewards) == singles
     batch = step_designs(env, [(20 + i, None) for i in range(3)], list(actions))
     assert [step[1] for step in batch] == singles
@@ -334,12 +331,16 @@ def test_a_step_beyond_the_landing_point_budget_runs_in_parts_with_the_single_en
     actions = venv.action_space.sample()
     _, rewards, *_ = venv.step(actions)
     assert sizes == [3, 2, 2]  # shared out evenly over the fewest parts
-    env = gym.make("spreadgym/SpinnerDesign-v1", **SMALL)
-    singles = []
-    for i in range(7):
-        env.reset(seed=40 + i)
-        singles.append(env.step(actions[i])[1])
-    assert list(rewards) == singles
+    assert list(rewards) == _single_rewards(gym.make("spreadgym/SpinnerDesign-v1", **SMALL), 40, actions)
+
+
+def _single_rewards(env, seed: int, actions) -> list:
+    """The reward of each action on `env` reset with seed + i, as vector sub-env i is."""
+    rewards = []
+    for i, action in enumerate(actions):
+        env.reset(seed=seed + i)
+        rewards.append(env.step(action)[1])
+    return rewards
 
 
 def test_an_error_in_a_later_part_reaches_the_step_and_leaves_no_thread(monkeypatch):
