@@ -64,7 +64,7 @@ def fold_pairs(tray_count, counts, racetrack):
 
 
 @PARALLEL
-def finish_designs(first, copies, run_first, run_start, run_stop, states, kappa, cos_mu, sin_mu, held, departed,
+def finish_designs(skip, first, copies, run_first, run_start, run_stop, states, kappa, cos_mu, sin_mu, held, departed,
                    flown_first, landing, mass, replicate, replicates, sample_first, out_x, out_mass, out_replicate,
                    width, min_half_trays, max_trays, tray_first, tray_room, masses_first, out_pooled,
                    out_per_replicate, target_trays, racetrack, out_status, out_half_trays, out_target, out_curve,
@@ -81,8 +81,12 @@ def finish_designs(first, copies, run_first, run_start, run_stop, states, kappa,
     curve width of 1..2 r + 1 trays, r the reach of the loaded trays (out_curve rows from
     tray_first[d]; none where nothing landed); and `Departure.means` of its departures
     (`position`, `velocity`, `spin`, `time` granule columns; `sign` the sense of its
-    rotation) in out_means[d] (the count as a float)."""
+    rotation) in out_means[d] (the count as a float). A design with skip[d] set is left
+    alone (its outputs unwritten): one whose turns the kernel does not draw (a concentration
+    above von_mises.LARGE_KAPPA, where numpy draws a normal angle)."""
     for d in prange(first.size - 1):
+        if skip[d]:
+            continue
         a, n, k = first[d], first[d + 1] - first[d], copies[d]
         count, speed, speed_sd, spin_mean, angle, time_mean = means_of(
             position[a:a + n], velocity[a:a + n], spin[a:a + n], time[a:a + n], departed[a:a + n], sign[d])

@@ -99,21 +99,22 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
     status, half_trays = np.empty(len(plans), dtype=np.int64), np.empty(len(plans), dtype=np.int64)
     target, curve = np.empty((len(plans), 4)), np.empty((tray_first[-1], 4))
     target_trays = np.array([_target_trays(scene.pattern.target_swath_m, w) for scene, w in zip(scenes, width)])
+    numpy_turns = np.logical_or.reduceat(laws.kappa > LARGE_KAPPA, first[:-1])  # `von_mises.fill_turns`' own case
     means = np.empty((len(plans), 6))
     sense = np.array([math.copysign(1.0, scene.spinner.omega_rad_s) for scene in scenes])
     with threads.numba_threads():
-        finish_designs(first, copies, *runs, laws.kappa, laws.cos_mu, laws.sin_mu, laws.held, departed, flown_first,
-                       landing_xy, g.mass_kg, g.replicate, replicates, sample_first, out_x, out_mass, out_replicate,
-                       width, min_half, pattern.MAX_TRAYS, tray_first, room, masses_first, out_pooled, out_masses,
+        finish_designs(numpy_turns, first, copies, *runs, laws.kappa, laws.cos_mu, laws.sin_mu, laws.held, departed,
+                       flown_first, landing_xy, g.mass_kg, g.replicate, replicates, sample_first, out_x, out_mass,
+                       out_replicate, width, min_half, pattern.MAX_TRAYS, tray_first, room, masses_first, out_pooled,
+                       out_masses,
                        target_trays, np.array([scene.pattern.driving == "racetrack" for scene in scenes]), status,
                        half_trays, target, curve, every.departure.position_m, every.departure.velocity_m_s,
                        every.departure.spin_rad_s, every.departure.time_s, sense, means)
-    numpy_turns = np.logical_or.reduceat(laws.kappa > LARGE_KAPPA, first[:-1])  # `von_mises.fill_turns`' own case
     landing_xy += 0.0  # the disc's axis (at 0) added, as the pipeline adds it
 
     results = []
     for d, (plan, throw) in enumerate(zip(plans, throws)):
-        if status[d] != OK or numpy_turns[d]:
+        if numpy_turns[d] or status[d] != OK:
             results.append(finish_scene(plan, departures[d], ci))
             continue
         w, m, k = width[d], int(half_trays[d]), int(replicates[d])

@@ -10,11 +10,12 @@ from spreadgym import threads
 from spreadgym.config.scene import MAX_RPM, load_scene
 from spreadgym.errors import ConfigError
 from spreadgym.physics.selection import SPINNER_MODELS
-from spreadgym.spread import pattern
+from spreadgym.spread import pattern, rotations
 from spreadgym.spread.batch import run_batch
 from spreadgym.spread.finish_kernel import fold_pairs
 from spreadgym.spread.pipeline import finish_scene, plan_scene, run_scene
 from spreadgym.spread.plain_finish import finish_plain, is_plain
+from spreadgym.spread.von_mises import LARGE_KAPPA
 
 
 def _finished_both_ways(scenes, library):
@@ -41,8 +42,11 @@ def test_plain_designs_finish_as_finish_scene_does_bit_for_bit(library, monkeypa
 
 
 def test_a_design_it_cannot_take_goes_through_finish_scene(library):
-    # a feed spot of 0.05 mm: concentrations above 1e6, whose turns numpy draws itself
-    tiny = load_scene("paper", {"sim.granules": 256, "feed.spread_m": 0.00005})
+    # a feed spot of 0.02 mm: concentrations above 1e6, whose turns numpy draws itself
+    tiny = load_scene("paper", {"sim.granules": 256, "feed.spread_m": 0.00002})
+    plan = plan_scene(tiny, "auto", library)
+    granules = plan.spins[0][0]
+    assert rotations.TurnLaws.of(granules.release_xy_m, [tiny], [granules.count]).kappa.max() > LARGE_KAPPA
     plain = load_scene("paper", {"sim.granules": 256})
     for new, old in zip(*_finished_both_ways([plain, tiny, plain], library)):
         _same(new, old)
