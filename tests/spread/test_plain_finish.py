@@ -32,7 +32,7 @@ def test_plain_designs_finish_as_finish_scene_does_bit_for_bit(library, monkeypa
         {}, {"spinner.cone_deg": 8.0}, {"flight.magnus": True}, {"vanes.pitch_deg": 15.0, "sim.angle_copies": 7},
         {"sim.replicates": 2}, {"sim.replicates": 1}, {"fertilizer": "potassium-chloride"},
         {"pattern.driving": "back-and-forth"}, {"pattern.tray_width_m": 0.3, "pattern.target_swath_m": 24.0},
-        {"spinner.rpm": 150.0}, {"flight.drag_coefficient": 0.0},
+        {"spinner.rpm": 150.0}, {"spinner.rpm": 10.0}, {"flight.drag_coefficient": 0.0},  # rpm 10: none departs
     ]
     scenes = [load_scene("paper", {**small, "sim.seed": i, **extra}) for i, extra in enumerate(settings)]
     scenes.append(load_scene("field", {**small, "sim.seed": 40}))
