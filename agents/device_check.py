@@ -273,37 +273,16 @@ def stage_timers():
 @contextmanager
 def finish_way(mode: Optional[str]):
     """None: the code as it is; "scene": every design through `finish_scene` (`batch.is_plain`
-    answering no); "serial": the vector env computing each next batch when its first sub-env
-    asks instead of beside the steps before it (an executor that runs a job when submitted)."""
-    from concurrent.futures import Future
-
-    from spreadgym.envs import vector
+    answering no: the finish before plain_finish, the same bits)."""
     from spreadgym.spread import batch as batch_module
 
-    class AtOnce:
-        def __init__(self, *args, **kwargs):
-            pass
-
-        def submit(self, work, *args):
-            future = Future()
-            try:
-                future.set_result(work(*args))
-            except Exception as error:  # noqa: BLE001 (handed to the step, as the helper thread would)
-                future.set_exception(error)
-            return future
-
-        def shutdown(self, wait: bool = True):
-            pass
-
-    plain, executor = batch_module.is_plain, vector.ThreadPoolExecutor
+    plain = batch_module.is_plain
     try:
         if mode == "scene":
             batch_module.is_plain = lambda plan: False
-        elif mode == "serial":
-            vector.ThreadPoolExecutor = AtOnce
         yield
     finally:
-        batch_module.is_plain, vector.ThreadPoolExecutor = plain, executor
+        batch_module.is_plain = plain
 
 
 def staged_batch(scenes, library, ci: bool = False) -> tuple[list, dict]:
@@ -455,13 +434,12 @@ def scaling_rows(n: int, args, scenes, library, venv, reference: dict, table: Ta
     from spreadgym.spread.batch import run_batch
 
     # at 8 threads and more, the same blocks also with every design through finish_scene
-    # (the finish before plain_finish, the same bits) and with the vector env computing its
-    # batches one after another instead of the next beside the steps ("no overlap"): A/Bs
-    # on the one machine. Every block resets the vector env with its own seed and steps it
-    # with its own actions, each way alike, so its results compare across ways and counts
+    # (the finish before plain_finish, the same bits): an A/B on the one machine. Every
+    # block resets the vector env with its own seed and steps it with its own actions, each
+    # way alike, so its results compare across ways and thread counts
     ways = [("", None)]
     if n >= 8 and hasattr(batch_module, "is_plain"):
-        ways += [(", finish_scene", "scene"), (", no overlap", "serial")]
+        ways += [(", finish_scene", "scene")]
     rates: dict = {f"{what}{tag}": [] for tag, _ in ways for what in ("run_batch mixed", "vector env")}
     rewards: dict = {tag: [] for tag, _ in ways}
     last, block_s = None, 0.0
@@ -475,13 +453,12 @@ def scaling_rows(n: int, args, scenes, library, venv, reference: dict, table: Ta
             actions = venv.action_space.sample()
         for tag, mode in ways:
             with finish_way(mode):
-                if mode != "serial":  # run_batch has no overlap to switch off
-                    start = time.perf_counter()
-                    found = run_batch(scenes, library=library, ci=False)
-                    if block:
-                        rates[f"run_batch mixed{tag}"].append(args.batch / (time.perf_counter() - start))
-                    if mode is None:
-                        last = found
+                start = time.perf_counter()
+                found = run_batch(scenes, library=library, ci=False)
+                if block:
+                    rates[f"run_batch mixed{tag}"].append(args.batch / (time.perf_counter() - start))
+                if mode is None:
+                    last = found
                 if venv is not None:
                     venv.reset(seed=1000 * block)
                     start = time.perf_counter()
@@ -501,8 +478,7 @@ def scaling_rows(n: int, args, scenes, library, venv, reference: dict, table: Ta
     same = {"run_batch mixed": all(np.array_equal(a, b) for a, b in zip(masses, reference["masses"])),
             "vector env": equal(rewards[""]),
             "run_batch mixed, finish_scene": None,  # its designs' masses are not kept: the env's check stands for it
-            "vector env, finish_scene": equal(rewards.get(", finish_scene", [])),
-            "vector env, no overlap": equal(rewards.get(", no overlap", []))}
+            "vector env, finish_scene": equal(rewards.get(", finish_scene", []))}
     for what, found in rates.items():
         if not found:
             continue

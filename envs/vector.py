@@ -21,9 +21,9 @@ docs/benchmark.md has every rung's rates.
 
 Size: any `num_envs`. A step runs its designs in batches of at most MAX_GRANULE_COPIES
 landing points (sim.granules x sim.angle_copies x discs per design: `spreadgym simulate`'s
-budget for one run), the next batch computed on a helper thread while the sub-envs of the
-one before step (`_Prefetched`), so a step holds at most two batches' results beyond what
-the sub-envs keep (each its last result, for `render`, until its next reset).
+budget for one run), each batch when the first of its sub-envs steps (`_Prefetched`), so a
+step never holds more than one batch's results beyond what the sub-envs keep (each its
+last result, for `render`, until its next reset).
 
 Autoreset (`autoreset_mode`): "next_step" (gymnasium's default: the step after an
 episode's end resets that sub-env and ignores its action), "same_step" (the sub-env is
@@ -37,7 +37,6 @@ keeps the others' observations; stepping an ended sub-env is an error).
 from __future__ import annotations
 
 import copy
-from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, Optional
 
 import numpy as np
@@ -156,7 +155,7 @@ class SpinnerDesignVectorEnv(VectorEnv):
                 self._observations[i] = obs
                 infos = self._add_info(infos, info, i)
         finally:
-            _back_to_task_run(self.task)
+            self.task.__dict__.pop("run", None)  # back to Task.run
         if mode is AutoresetMode.NEXT_STEP:
             self._autoreset = terminated | truncated
         elif mode is AutoresetMode.DISABLED:
@@ -191,45 +190,21 @@ class SpinnerDesignVectorEnv(VectorEnv):
 class _Prefetched:
     """A task's `run` for one vector step: the results of `scenes` in order, each for the
     scene it was computed for (checked), computed by `run_batch` in parts of at most
-    MAX_GRANULE_COPIES landing points. The first part is computed when its first scene is
-    asked for; each next part on a helper thread as soon as the one before is handed over,
-    so that it is computed while the sub-envs of that one step (their Python overlaps the
-    part's compiled kernels). At most two parts' results are held at once."""
+    MAX_GRANULE_COPIES landing points, each when the first of its scenes is asked for.
+    (Computing the next part on a helper thread while the sub-envs of the part before
+    step was measured: a tie on two and on sixteen cores, docs/performance.md.)"""
 
     def __init__(self, scenes: list, run_batch) -> None:
         self.scenes, self.run_batch = list(scenes), run_batch
         self.results: list = []
-        self.coming: Optional[Future] = None
-        self.helper: Optional[ThreadPoolExecutor] = None
 
     def __call__(self, scene, rendering: bool = False, batch=None):
         if not self.results:
-            self.results = self.coming.result() if self.coming is not None else self._part(self.scenes)
-            self.coming = None
-            rest = self.scenes[len(self.results):]
-            if rest:  # more parts to come: the next one now, beside the steps
-                self.helper = self.helper or ThreadPoolExecutor(1, thread_name_prefix="spreadgym-vector")
-                self.coming = self.helper.submit(self._part, rest)
+            self.results = list(self.run_batch(self.scenes[:_part_size(self.scenes)]))
         expected, result = self.scenes.pop(0), self.results.pop(0)
         if rendering or scene != expected:  # a hidden batch is in the scene (its fertilizer copy, its contacts)
             raise RuntimeError("the vector env's batch and its sub-envs' steps disagree")
         return result
-
-    def _part(self, scenes: list) -> list:
-        """The results of the first part of `scenes`."""
-        return list(self.run_batch(scenes[:_part_size(scenes)]))
-
-    def close(self) -> None:
-        """Wait for a part still being computed (a step that failed part-way) and let the helper go."""
-        if self.helper is not None:
-            self.helper.shutdown(wait=True)
-
-
-def _back_to_task_run(task) -> None:
-    """The task's own `run` again, after a step's `_Prefetched` (closed)."""
-    prefetched = task.__dict__.pop("run", None)
-    if isinstance(prefetched, _Prefetched):
-        prefetched.close()
 
 
 def _part_size(scenes: list) -> int:
@@ -271,7 +246,7 @@ def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], action
             steps.append(env.step(action))
         return steps
     finally:
-        _back_to_task_run(task)
+        task.__dict__.pop("run", None)  # back to Task.run
 
 
 def _one_by_one(env, resets, actions) -> list[tuple]:
