@@ -1,7 +1,7 @@
 """One measuring run for a lent 16-core machine with an NVIDIA GPU (the device tool's
 `nvidia-h100-x1` / `nvidia-h200`): CPU scaling of the batch paths and the CUDA spinner
 against the CPU, in one call of a few minutes. Run through `agents/device_check.sh`,
-which installs the carried wheels and this repository into /tmp/site first; never run by
+which installs the carried wheels and this repository into a temporary folder first; never run by
 the tests or `make bench`.
 
 What it measures (every figure is written under `--out` as soon as it exists, so a run
@@ -60,6 +60,7 @@ import platform
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 import traceback
 from contextlib import contextmanager
@@ -912,7 +913,7 @@ def main(argv: Optional[list[str]] = None) -> None:
     args.batch = args.batch or (24 if args.quick else 256)
     Path(args.out).mkdir(parents=True, exist_ok=True)
     if args.work is None:
-        args.work = f"/tmp/device-check-{os.getpid()}"
+        args.work = tempfile.mkdtemp(prefix="device-check-")
     Path(args.work).mkdir(parents=True, exist_ok=True)
     args.out, args.work = str(Path(args.out).resolve()), str(Path(args.work).resolve())
     if args.role == "gpu":

@@ -3,14 +3,14 @@
 # what it measures). Run from the repository root, with the wheels of the packages that
 # machine lacks in .whl/ (carried: pydantic, gymnasium, pymunk, cma and their needs):
 #   bash agents/device_check.sh [driver options, e.g. --quick]
-# It installs the wheels and this repository into $SITE (default /tmp/site) without the
+# It installs the wheels and this repository into $SITE (default a new temporary folder) without the
 # network, prints the versions and the GPUs, then runs the driver; everything goes to
 # $OUT (the device tool's folder; default out/device-check), device_check.log included.
 # PYTHON (default python3), SITE and LIMIT (the driver's hard stop, s; default 450) can be set.
 set -u
 export PYTHONUNBUFFERED=1
 PY=${PYTHON:-python3}
-SITE=${SITE:-/tmp/site}
+SITE=${SITE:-$(mktemp -d)}
 OUT=${OUT:-$PWD/out/device-check}
 mkdir -p "$OUT"
 start=$(date +%s)
