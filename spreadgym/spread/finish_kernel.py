@@ -19,48 +19,16 @@ from __future__ import annotations
 import numpy as np
 from numba import prange
 
-from spreadgym.physics.compiled.options import KERNEL, PARALLEL
+from spreadgym.physics.compiled.options import PARALLEL
 from spreadgym.physics.departure import means_of
 from spreadgym.spread.binning import OK, bin_landings
 from spreadgym.spread.estimate import bout_cvs
+from spreadgym.spread.pattern import fold_pair_arrays
 from spreadgym.spread.rotations import turned_copies
 from spreadgym.spread.von_mises import antithetic_turns
 
 NO_ROOM = 100
 """A status beyond binning's: the design's row needed more trays than the caller made room for."""
-
-
-@KERNEL
-def fold_pairs(tray_count, counts, racetrack):
-    """`pattern.fold_pairs` (racetrack or back-and-forth driving) in compiled code, the
-    pairs in the same order (`bout_cvs` adds them in that order)."""
-    m = tray_count // 2
-    tray = np.empty(2 * tray_count * counts.size, dtype=np.int64)
-    column = np.empty(tray.size, dtype=np.int64)
-    p = 0
-    start = 0
-    for j in range(counts.size):
-        n = counts[j]
-        if racetrack:
-            for t in range(tray_count):
-                tray[p] = t
-                column[p] = start + (t - m + n // 2) % n
-                p += 1
-        else:
-            for t in range(tray_count):  # unmirrored passes
-                q = (t - m + n // 2) % (2 * n)
-                if q < n:
-                    tray[p] = t
-                    column[p] = start + q
-                    p += 1
-            for t in range(tray_count):  # mirrored passes
-                q = (n - (t - m) + n // 2) % (2 * n)
-                if q < n:
-                    tray[p] = t
-                    column[p] = start + q
-                    p += 1
-        start += n
-    return tray[:p], column[:p]
 
 
 @PARALLEL
@@ -139,7 +107,7 @@ def finish_designs(skip, first, copies, run_first, run_start, run_stop, states, 
         masses = out_per_replicate[m0:m0 + replicates[d] * trays].reshape((replicates[d], trays))
         masses[:] = per_replicate
         target = np.full(1, target_trays[d])
-        tray, column = fold_pairs(trays, target, racetrack[d])
+        tray, column = fold_pair_arrays(trays, target, racetrack[d])
         raw, cv, se, usable = bout_cvs(masses, tray, column, target)
         out_target[d, 0], out_target[d, 1], out_target[d, 2], out_target[d, 3] = raw[0], cv[0], se[0], usable[0]
         reach = -1
@@ -149,7 +117,7 @@ def finish_designs(skip, first, copies, run_first, run_start, run_stop, states, 
         if reach < 0:
             continue
         widths = np.arange(1, 2 * reach + 2)  # `pattern.default_widths_m` in trays
-        tray, column = fold_pairs(trays, widths, racetrack[d])
+        tray, column = fold_pair_arrays(trays, widths, racetrack[d])
         raw, cv, se, usable = bout_cvs(masses, tray, column, widths)
         for w in range(widths.size):
             out_curve[t0 + w, 0], out_curve[t0 + w, 1], out_curve[t0 + w, 2] = raw[w], cv[w], se[w]

@@ -223,19 +223,43 @@ def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.nd
     Back-and-forth: unmirrored passes (even j) put tray i at k = i + j n, i.e.
     k = i (mod 2n); mirrored passes (odd j) put it at k = j n - i, i.e.
     k = n - i (mod 2n); so q = (i + n // 2) mod 2n and q = (n - i + n // 2) mod 2n,
-    each where q < n."""
+    each where q < n. The pairs come bout by bout, each tray in turn (back-and-forth:
+    the unmirrored passes' trays, then the mirrored passes'): `bout_cvs` adds them in
+    this order."""
+    return fold_pair_arrays(int(tray_count), np.asarray(counts, dtype=np.int64), driving == "racetrack")
+
+
+@KERNEL
+def fold_pair_arrays(tray_count, counts, racetrack):
+    """`fold_pairs` in compiled code, for kernels that fold rows themselves
+    (spreadgym.spread.finish_kernel); `racetrack` False: back-and-forth."""
     m = tray_count // 2
-    i = np.arange(-m, m + 1)[None, :]
-    n = np.asarray(counts, dtype=np.int64)[:, None]
-    start = np.cumsum(n) - n[:, 0]
-    trays = np.broadcast_to(np.arange(tray_count), (n.shape[0], tray_count))
-    if driving == "racetrack":
-        q = (i + n // 2) % n
-        return trays.ravel(), (start[:, None] + q).ravel()
-    q = np.concatenate([(i + n // 2) % (2 * n), (n - i + n // 2) % (2 * n)], axis=1)
-    both = np.concatenate([trays, trays], axis=1)
-    hit = q < n
-    return both[hit], (start[:, None] + q)[hit]
+    tray = np.empty(2 * tray_count * counts.size, dtype=np.int64)
+    column = np.empty(tray.size, dtype=np.int64)
+    p = 0
+    start = 0
+    for j in range(counts.size):
+        n = counts[j]
+        if racetrack:
+            for t in range(tray_count):
+                tray[p] = t
+                column[p] = start + (t - m + n // 2) % n
+                p += 1
+        else:
+            for t in range(tray_count):  # unmirrored passes
+                q = (t - m + n // 2) % (2 * n)
+                if q < n:
+                    tray[p] = t
+                    column[p] = start + q
+                    p += 1
+            for t in range(tray_count):  # mirrored passes
+                q = (n - (t - m) + n // 2) % (2 * n)
+                if q < n:
+                    tray[p] = t
+                    column[p] = start + q
+                    p += 1
+        start += n
+    return tray[:p], column[:p]
 
 
 def _fold_matrix(tray_count: int, n: int, driving: str) -> np.ndarray:
