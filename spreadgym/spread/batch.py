@@ -63,8 +63,9 @@ def run_batch(scenes: Sequence[Scene], model: str = "auto", library: Optional[Ma
         for owner, departure in zip(owners, SPINNER_MODELS[chosen].run_batch(runs)):
             departures[owner].append(departure)
 
-    plain = [i for i, plan in enumerate(plans) if is_plain(plan)]
-    others = [i for i, plan in enumerate(plans) if not is_plain(plan)]
+    plainness = [is_plain(plan) for plan in plans]
+    plain = [i for i, yes in enumerate(plainness) if yes]
+    others = [i for i, yes in enumerate(plainness) if not yes]
     results: list = [None] * len(plans)
     for i, result in zip(plain, finish_plain([plans[i] for i in plain], [departures[i] for i in plain], ci)):
         results[i] = result

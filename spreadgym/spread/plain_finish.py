@@ -84,9 +84,12 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
     laws = rotations.TurnLaws.of(g.release_xy_m, scenes, counts)
     landing_xy, landing_t = _flights(scenes, throws, every, departed, counts, flown)
 
-    copies = np.array([rotations.copies_for(scene)[0] for scene in scenes])
+    copies_and_reasons = [rotations.copies_for(scene) for scene in scenes]
+    copies = np.array([count for count, _ in copies_and_reasons])
     replicates = np.maximum.reduceat(g.replicate, first[:-1]) + 1
-    runs = _turn_runs(plans, g.replicate, first)
+    run_first, run_start, run_stop, streams = rotations.turn_streams(
+        g.replicate, first, [scene.sim.seed for scene in scenes], [plan.first_replicate for plan in plans])
+    runs = (run_first, run_start, run_stop, pcg64.seeded(streams))
     width = np.array([float(scene.pattern.tray_width_m) for scene in scenes])
     min_half = np.array([pattern.min_half_trays(scene.pattern.target_swath_m, w) for scene, w in zip(scenes, width)])
     room = _tray_room(landing_xy, flown, flown_first, width, min_half)
@@ -102,14 +105,14 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
     numpy_turns = np.logical_or.reduceat(laws.kappa > LARGE_KAPPA, first[:-1])  # `von_mises.fill_turns`' own case
     means = np.empty((len(plans), 6))
     sense = np.array([math.copysign(1.0, scene.spinner.omega_rad_s) for scene in scenes])
+    racetrack = np.array([scene.pattern.driving == "racetrack" for scene in scenes])
     with threads.numba_threads():
         finish_designs(numpy_turns, first, copies, *runs, laws.kappa, laws.cos_mu, laws.sin_mu, laws.held, departed,
                        flown_first, landing_xy, g.mass_kg, g.replicate, replicates, sample_first, out_x, out_mass,
                        out_replicate, width, min_half, pattern.MAX_TRAYS, tray_first, room, masses_first, out_pooled,
-                       out_masses,
-                       target_trays, np.array([scene.pattern.driving == "racetrack" for scene in scenes]), status,
-                       half_trays, target, curve, every.departure.position_m, every.departure.velocity_m_s,
-                       every.departure.spin_rad_s, every.departure.time_s, sense, means)
+                       out_masses, target_trays, racetrack, status, half_trays, target, curve,
+                       every.departure.position_m, every.departure.velocity_m_s, every.departure.spin_rad_s,
+                       every.departure.time_s, sense, means)
     landing_xy += 0.0  # the disc's axis (at 0) added, as the pipeline adds it
 
     results = []
@@ -130,26 +133,9 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
         results.append(result_of(
             plan, [throw], throw, flying, flight_model.Landing(landing_xy[flights], landing_t[flights]),
             estimate.TraySample(out_x[samples], out_mass[samples], out_replicate[samples]), int(copies[d]),
-            rotations.copies_for(plan.scene)[1], [0.0], ci, trays, masses, at_target, widths, cvs,
+            copies_and_reasons[d][1], [0.0], ci, trays, masses, at_target, widths, cvs,
             (int(means[d, 0]), *(float(v) for v in means[d, 1:]))))
     return results
-
-
-def _turn_runs(plans: Sequence[ScenePlan], replicate: np.ndarray,
-               first: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The replicates of every design, as `rotations.drawn_turns` draws their turns: each
-    design's first run (D + 1,), each run's first and last-plus-one granule within its
-    design, and the PCG64 state of its stream (seed, first_replicate + replicate, COPY_STREAM)."""
-    starts = np.ones(replicate.size, dtype=bool)
-    starts[1:] = replicate[1:] != replicate[:-1]
-    starts[first[:-1]] = True  # every design starts a run
-    at = np.flatnonzero(starts)
-    owner = np.searchsorted(first, at, side="right") - 1
-    run_first = np.searchsorted(at, first)
-    stops = np.append(at[1:], replicate.size)
-    seeds = [(plans[o].scene.sim.seed, plans[o].first_replicate + int(replicate[a]), rotations.COPY_STREAM)
-             for o, a in zip(owner, at)]
-    return run_first, at - first[owner], stops - first[owner], pcg64.seeded(seeds)
 
 
 def _tray_room(landing_xy: np.ndarray, flown: np.ndarray, flown_first: np.ndarray, width: np.ndarray,

@@ -136,6 +136,23 @@ class TurnLaws:
         return TurnLaws(*(a[start:stop] for a in (self.cos_mu, self.sin_mu, self.kappa, self.held)))
 
 
+def turn_streams(replicate: np.ndarray, first: np.ndarray, seeds: Sequence[int],
+                 first_replicates: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
+    """The replicates of granules of one or more designs side by side (design d's granules
+    first[d]..first[d + 1] - 1, its replicates 0, 1, ... each a consecutive run), as their
+    turns are drawn: each design's first run (D + 1,), each run's first and last-plus-one
+    granule within its design, and its stream (seeds[d], first_replicates[d] + replicate,
+    COPY_STREAM)."""
+    starts = np.ones(replicate.size, dtype=bool)
+    starts[1:] = replicate[1:] != replicate[:-1]
+    starts[first[:-1]] = True  # every design starts a run
+    at = np.flatnonzero(starts)
+    owner = np.searchsorted(first, at, side="right") - 1
+    stops = np.append(at[1:], replicate.size)
+    streams = [(seeds[o], first_replicates[o] + int(replicate[a]), COPY_STREAM) for o, a in zip(owner, at)]
+    return np.searchsorted(at, first), at - first[owner], stops - first[owner], streams
+
+
 def drawn_turns(replicate: np.ndarray, laws: TurnLaws, copies: int, seed: int, first_replicate: int) -> Turn:
     """`copy_turns` of granules in replicates `replicate` (0, 1, ... in consecutive runs)
     whose turns follow `laws`. Each replicate draws from its own stream (seed,
@@ -145,10 +162,8 @@ def drawn_turns(replicate: np.ndarray, laws: TurnLaws, copies: int, seed: int, f
     # rows 1.. are filled for every granule below (each is in one replicate); row 0 is s = 0
     cos_turn, sin_turn = np.empty((copies, n)), np.empty((copies, n))
     cos_turn[0], sin_turn[0] = 1.0, 0.0
-    starts = np.flatnonzero(np.diff(replicate, prepend=-1))
-    stops = np.append(starts[1:], n)
-    seeds = [(seed, first_replicate + int(replicate[start]), COPY_STREAM) for start in starts]
-    von_mises.fill_turns(seeds, starts, stops, laws.kappa, laws.cos_mu, laws.sin_mu, cos_turn, sin_turn)
+    _, starts, stops, streams = turn_streams(replicate, np.array([0, n]), [seed], [first_replicate])
+    von_mises.fill_turns(streams, starts, stops, laws.kappa, laws.cos_mu, laws.sin_mu, cos_turn, sin_turn)
     held = np.flatnonzero(laws.held)  # a point pulled back by the clip keeps its angle (s = 0)
     if held.size:
         cos_turn[:, held], sin_turn[:, held] = 1.0, 0.0
