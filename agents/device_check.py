@@ -355,10 +355,21 @@ def sources_digests() -> dict:
     return found
 
 
-def thread_counts(quick: bool, asked: Optional[str] = None) -> list[int]:
+def thread_counts(quick: bool, asked: Optional[list[int]] = None) -> list[int]:
     cores = len(os.sched_getaffinity(0))
-    counts = [n for n in (FULL_THREADS if not asked else [int(v) for v in asked.split(",")]) if n <= cores]
+    counts = [n for n in (asked or FULL_THREADS) if n <= cores]
     return counts[:2] if quick else counts
+
+
+def thread_list(text: str) -> list[int]:
+    """`--threads`: whole numbers >= 1, comma-separated."""
+    try:
+        counts = [int(part) for part in text.split(",")]
+    except ValueError:
+        counts = []
+    if not counts or min(counts) < 1:
+        raise argparse.ArgumentTypeError(f"expected thread counts >= 1 separated by commas, e.g. 1,16; got {text!r}")
+    return counts
 
 
 def cpu_main(args) -> None:
@@ -897,7 +908,8 @@ def main(argv: Optional[list[str]] = None) -> None:
     parser.add_argument("--gpu-sim", action="store_true", help="the GPU section on numba's CUDA simulator, toy sizes")
     parser.add_argument("--batch", type=int, default=None, help="designs per CPU block (default 256; quick 24)")
     parser.add_argument("--repeats", type=int, default=3, help="timed blocks after the warm-up")
-    parser.add_argument("--threads", default=None, help="the CPU series' thread counts, e.g. 1,16 (default 1,2,4,8,16)")
+    parser.add_argument("--threads", type=thread_list, default=None,
+                        help="the CPU series' thread counts, e.g. 1,16 (default 1,2,4,8,16)")
     parser.add_argument("--deadline-s", type=float, default=420.0, help="the whole run's time, both processes")
     parser.add_argument("--compile-wait-s", type=float, default=120.0,
                         help="longest wait for the CUDA compile before the 16-thread CPU series")
