@@ -11,11 +11,15 @@ on it (every granule's arithmetic is the same on any thread).
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import itertools
 import os
+import re
 import sys
 import threading
 from contextlib import contextmanager
+from importlib import metadata
 from typing import Callable, Iterator, Optional, TypeVar
 
 from spreadgym.errors import ConfigError
@@ -48,16 +52,39 @@ def numba_threads() -> Iterator[int]:
     at most numba's pool (NUMBA_NUM_THREADS). numba's count is per calling thread, so it
     is set at each launch. Unless NUMBA_THREADING_LAYER says otherwise, numba takes a
     fork-safe layer: GNU OpenMP's kills a forked child (multiprocessing's default start,
-    gymnasium's async vector env), and the fallback (workqueue) allows one launch at a
-    time per process, hence the lock."""
+    gymnasium's async vector env). That is oneTBB where pip's `tbb` is installed (its
+    work-stealing evens out granules of unequal cost and a thread that wakes late;
+    `_findable_tbb`), else numba's workqueue, which allows one launch at a time per
+    process, hence the lock."""
     import numba
 
     with _LAUNCH:
         if "NUMBA_THREADING_LAYER" not in os.environ:
+            _findable_tbb()
             numba.config.THREADING_LAYER = "forksafe"
         count = min(thread_count(), numba.config.NUMBA_NUM_THREADS)
         numba.set_num_threads(count)
         yield count
+
+
+@functools.lru_cache(maxsize=None)
+def _findable_tbb() -> bool:
+    """Load pip's oneTBB library (the `tbb` wheel puts it in the environment's lib folder,
+    where the loader does not look) so that numba's TBB layer, which needs it by name,
+    finds it. False where there is none to load: numba then takes its workqueue, with the
+    same results (every granule and every design is computed alone, whichever thread)."""
+    try:
+        files = metadata.files("tbb") or []
+    except metadata.PackageNotFoundError:
+        return False
+    for file in files:
+        if re.fullmatch(r"libtbb\.so\.\d+", file.name):
+            try:
+                ctypes.CDLL(str(file.locate()), mode=ctypes.RTLD_GLOBAL)
+            except OSError:
+                return False
+            return True
+    return False
 
 
 def thread_map(work: Callable[[int], T], count: int) -> list[T]:

@@ -4,6 +4,9 @@ with the single evaluation's errors; and the thread policy (spreadgym.threads)."
 import json
 import math
 import os
+import subprocess
+import sys
+from importlib import metadata
 
 import numba
 import numpy as np
@@ -16,6 +19,13 @@ from spreadgym.spread.batch import run_batch
 from spreadgym.spread.pipeline import run_scene
 
 FIELDS = ("replicate_masses_kg", "landed")
+
+
+def _tbb_files():
+    try:
+        return metadata.files("tbb")
+    except metadata.PackageNotFoundError:
+        return None
 
 
 def _same(a, b):
@@ -116,6 +126,19 @@ def test_a_forked_child_runs_after_its_parent_ran_the_parallel_kernel(library):
         finally:
             os._exit(code)
     assert os.waitpid(pid, 0)[1] == 0
+
+
+@pytest.mark.skipif(not any(f.name.startswith("libtbb.so.") for f in (_tbb_files() or [])),
+                    reason="pip's tbb is not installed (not x86-64): numba takes its workqueue")
+def test_where_pip_installed_tbb_the_kernels_run_on_numba_s_tbb_layer():
+    """pip's tbb puts its library where the loader does not look; spreadgym.threads loads
+    it, so a fresh process's first kernel launch takes oneTBB, not the workqueue."""
+    code = ("import numba; from spreadgym.config.scene import load_scene; "
+            "from spreadgym.spread.pipeline import run_scene; "
+            "run_scene(load_scene('paper', {'sim.granules': 64})); print(numba.threading_layer())")
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_THREADING_LAYER", "LD_LIBRARY_PATH")}
+    found = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert found.stdout.split()[-1] == "tbb"
 
 
 @pytest.mark.parametrize("value", ["0", "-2", "two", "1.5", " "])
