@@ -15,6 +15,7 @@ OUT=${OUT:-$PWD/out/device-check}
 mkdir -p "$OUT"
 start=$(date +%s)
 {
+  mkdir -p "$SITE/lib"
   if [ -d .whl ]; then
     $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" .whl/*.whl \
       || echo "!! wheel install failed"
@@ -27,6 +28,18 @@ start=$(date +%s)
       && cp -r agents "$SITE/spreadgym/agents" && cp -r configs "$SITE/spreadgym/configs"
   fi
   export PYTHONPATH=$SITE${PYTHONPATH:+:$PYTHONPATH}
+  # pip --target drops a wheel's data files, where pip's tbb keeps its libraries: unpack them beside
+  # and let the loader find them, so numba takes oneTBB as the default install does (env.json says which layer ran)
+  for wheel in .whl/tbb-*.whl .whl/tcmlib-*.whl; do
+    [ -f "$wheel" ] && $PY -c 'import sys, zipfile, os
+with zipfile.ZipFile(sys.argv[1]) as z:
+    for name in z.namelist():
+        if "/data/lib/" in name and not name.endswith("/"):
+            target = os.path.join(sys.argv[2], os.path.basename(name))
+            with open(target, "wb") as f:
+                f.write(z.read(name))' "$wheel" "$SITE/lib"
+  done
+  export LD_LIBRARY_PATH=$SITE/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
   if [ -z "${CUDA_HOME:-}" ] && [ -d /usr/local/cuda ]; then export CUDA_HOME=/usr/local/cuda; fi
   echo "installed in $(( $(date +%s) - start )) s; nproc $(nproc); CUDA_HOME=${CUDA_HOME:-unset}"
   $PY -c 'import sys, numpy, numba; print("python", sys.version.split()[0], "numpy", numpy.__version__, "numba", numba.__version__)'
