@@ -67,24 +67,28 @@ def numba_threads() -> Iterator[int]:
         yield count
 
 
-@functools.lru_cache(maxsize=None)
-def _findable_tbb() -> bool:
-    """Load pip's oneTBB library (the `tbb` wheel puts it in the environment's lib folder,
-    where the loader does not look) so that numba's TBB layer, which needs it by name,
-    finds it. False where there is none to load: numba then takes its workqueue, with the
-    same results (every granule and every design is computed alone, whichever thread)."""
+def tbb_library() -> Optional[str]:
+    """The path of pip's oneTBB library (`libtbb.so.N` among the `tbb` wheel's files, which
+    pip puts in the environment's lib folder, where the loader does not look); None where
+    that wheel is not installed."""
     try:
         files = metadata.files("tbb") or []
     except metadata.PackageNotFoundError:
-        return False
-    for file in files:
-        if re.fullmatch(r"libtbb\.so\.\d+", file.name):
-            try:
-                ctypes.CDLL(str(file.locate()), mode=ctypes.RTLD_GLOBAL)
-            except OSError:
-                return False
-            return True
-    return False
+        return None
+    return next((str(file.locate()) for file in files if re.fullmatch(r"libtbb\.so\.\d+", file.name)), None)
+
+
+@functools.lru_cache(maxsize=None)
+def _findable_tbb() -> None:
+    """Load `tbb_library()` once, so that numba's TBB layer, which needs the library by
+    name, finds it. Where there is none (or it does not load) numba takes its workqueue,
+    with the same results (every granule and every design is computed alone, whichever thread)."""
+    path = tbb_library()
+    if path is not None:
+        try:
+            ctypes.CDLL(path, mode=ctypes.RTLD_GLOBAL)
+        except OSError:
+            pass  # the workqueue, as without the wheel
 
 
 def thread_map(work: Callable[[int], T], count: int) -> list[T]:

@@ -6,7 +6,6 @@ import math
 import os
 import subprocess
 import sys
-from importlib import metadata
 
 import numba
 import numpy as np
@@ -19,13 +18,6 @@ from spreadgym.spread.batch import run_batch
 from spreadgym.spread.pipeline import run_scene
 
 FIELDS = ("replicate_masses_kg", "landed")
-
-
-def _tbb_files():
-    try:
-        return metadata.files("tbb")
-    except metadata.PackageNotFoundError:
-        return None
 
 
 def _same(a, b):
@@ -128,8 +120,8 @@ def test_a_forked_child_runs_after_its_parent_ran_the_parallel_kernel(library):
     assert os.waitpid(pid, 0)[1] == 0
 
 
-@pytest.mark.skipif(not any(f.name.startswith("libtbb.so.") for f in (_tbb_files() or [])),
-                    reason="pip's tbb is not installed (not x86-64): numba takes its workqueue")
+@pytest.mark.skipif(threads.tbb_library() is None,
+                    reason="pip's tbb is not installed (not Linux x86-64): numba takes its workqueue")
 def test_where_pip_installed_tbb_the_kernels_run_on_numba_s_tbb_layer():
     """pip's tbb puts its library where the loader does not look; spreadgym.threads loads
     it, so a fresh process's first kernel launch takes oneTBB, not the workqueue."""
