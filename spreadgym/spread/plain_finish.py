@@ -113,7 +113,7 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
                        out_masses, target_trays, racetrack, status, half_trays, target, curve,
                        every.departure.position_m, every.departure.velocity_m_s, every.departure.spin_rad_s,
                        every.departure.time_s, sense, means)
-    landing_xy += 0.0  # the disc's axis (at 0) added, as the pipeline adds it
+    landing_xy += 0.0  # finish_scene adds the disc's centre, 0 here, which turns -0.0 into 0.0: the same bits
 
     results = []
     for d, (plan, throw) in enumerate(zip(plans, throws)):
