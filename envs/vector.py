@@ -19,6 +19,13 @@ side on spreadgym.threads' threads), with the same bits as one run each; each su
 hidden batches run together, in one library holding every episode's fertilizer copy.
 docs/benchmark.md has every rung's rates.
 
+`workers=P` (default 1) runs the sub-envs in P worker processes, contiguous blocks of
+near-equal size, each block a vector env of its own with its share of the threads
+(envs/shards.py): the Python around each batch, one thread's work in one process, then
+runs P at a time. Same bits as one process; P at most the threads spreadgym may use, and 1
+on a GPU. Two workers of one thread gave 1.10x one process of two threads on two cores
+(docs/performance.md).
+
 Size: any `num_envs`. A step runs its designs in batches of at most MAX_GRANULE_COPIES
 landing points (sim.granules x sim.angle_copies x discs per design: `spreadgym simulate`'s
 budget for one run), each batch when the first of its sub-envs steps (`_Prefetched`), so a
@@ -43,8 +50,10 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from spreadgym import device, threads
 from spreadgym.config.scene import MAX_GRANULE_COPIES, granule_copies
 from spreadgym.envs.common.task import batches_library
+from spreadgym.envs.shards import Shards
 from spreadgym.envs.spinner_design import SpinnerDesignEnv
 from spreadgym.errors import ConfigError
 
@@ -56,13 +65,14 @@ MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_S
 
 
 class SpinnerDesignVectorEnv(VectorEnv):
-    """`num_envs` SpinnerDesign sub-envs sharing one task; keyword arguments as `gym.make`."""
+    """`num_envs` SpinnerDesign sub-envs sharing one task (in `workers` processes); other
+    keyword arguments as `gym.make`."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": SpinnerDesignEnv.metadata["render_fps"],
                 "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, autoreset_mode: str | AutoresetMode = "next_step",
-                 render_mode: Optional[str] = None, **kwargs: Any):
+                 render_mode: Optional[str] = None, workers: int = 1, **kwargs: Any):
         if (isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer))
                 or not 1 <= num_envs <= MAX_NUM_ENVS):
             raise ConfigError("num_envs", f"expected an integer from 1 to {MAX_NUM_ENVS}, got {num_envs!r}")
@@ -73,8 +83,15 @@ class SpinnerDesignVectorEnv(VectorEnv):
             raise ConfigError("render_mode", f"unknown {render_mode!r}; the vector env renders rgb_array "
                                              "(a tuple of frames, one per sub-env)")
         first = SpinnerDesignEnv(render_mode=render_mode, **kwargs)
-        self.envs = [first] + [_sharing_task(first) for _ in range(int(num_envs) - 1)]
         self.num_envs = int(num_envs)
+        self._first = first
+        self._shards: Optional[Shards] = None
+        if _checked_workers(workers, self.num_envs, first) == 1:
+            self.envs = [first] + [_sharing_task(first) for _ in range(self.num_envs - 1)]
+        else:
+            self.envs = []  # they live in the workers
+            self._shards = Shards(SpinnerDesignVectorEnv, self.num_envs, workers,
+                                  {"autoreset_mode": mode, "render_mode": render_mode, **kwargs})
         self.metadata = {**self.metadata, "autoreset_mode": MODES[mode]}
         self.render_mode = render_mode
         self.single_action_space = first.action_space
@@ -87,8 +104,9 @@ class SpinnerDesignVectorEnv(VectorEnv):
 
     @property
     def task(self):
-        """The task all sub-envs share (its `settings_map` maps actions to settings)."""
-        return self.envs[0].task
+        """The task all sub-envs share (its `settings_map` maps actions to settings; with
+        workers, each worker holds its own copy)."""
+        return self._first.task
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: Optional[dict] = None):
         """Reset the sub-envs: every one, or those of `options["reset_mask"]` (a bool array of
@@ -100,14 +118,27 @@ class SpinnerDesignVectorEnv(VectorEnv):
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))  # the vector env's own np_random, as gymnasium's
         infos: dict = {}
-        for i, (env, env_seed) in enumerate(zip(self.envs, seeds)):
-            if mask is None or mask[i]:
-                self._observations[i], info = env.reset(seed=env_seed, options=options or None)
-                infos = self._add_info(infos, info, i)
+        for i, observation, info in self._reset_records(seeds, options, mask):
+            self._observations[i] = observation
+            infos = self._add_info(infos, info, i)
         reset = np.ones(self.num_envs, dtype=bool) if mask is None else mask
         self._autoreset[reset] = False
         self._ended[reset] = False
         return self._observations.copy(), infos
+
+    def _reset_records(self, seeds: list, options: dict, mask: Optional[np.ndarray]) -> list[tuple]:
+        """(i, observation, info) of each sub-env reset (all, or those of `mask`), in order."""
+        if self._shards is not None:
+            return self._from_workers("_reset_records", lambda a, b: None if mask is not None and not mask[a:b].any()
+                                      else (seeds[a:b], options, None if mask is None else mask[a:b]))
+        return [(i, *env.reset(seed=env_seed, options=options or None))
+                for i, (env, env_seed) in enumerate(zip(self.envs, seeds)) if mask is None or mask[i]]
+
+    def _from_workers(self, name: str, args_of) -> list[tuple]:
+        """The records of method `name` on every worker (`args_of(first, stop)`: its
+        arguments for the block [first, stop), or None to leave it out), indices global."""
+        answers = self._shards.call(name, [args_of(a, b) for a, b in self._shards.blocks])
+        return [(a + i, *rest) for (a, _), records in zip(self._shards.blocks, answers) for i, *rest in records or []]
 
     def _seeds(self, seed) -> list[Optional[int]]:
         if seed is None:
@@ -138,44 +169,64 @@ class SpinnerDesignVectorEnv(VectorEnv):
         if mode is AutoresetMode.DISABLED and self._ended.any():
             raise ValueError(f"sub-envs {np.flatnonzero(self._ended).tolist()} ended their episodes; autoreset is "
                              "disabled: reset them first with reset(options={'reset_mask': mask})")
-        self._run_designs(actions)
-        try:
-            rewards = np.zeros(self.num_envs, dtype=np.float64)
-            terminated = np.zeros(self.num_envs, dtype=bool)
-            truncated = np.zeros(self.num_envs, dtype=bool)
-            infos: dict = {}
-            for i, env in enumerate(self.envs):
-                if self._autoreset[i]:  # next_step mode only
-                    obs, info = env.reset()
-                else:
-                    obs, rewards[i], terminated[i], truncated[i], info = env.step(actions[i])
-                    if mode is AutoresetMode.SAME_STEP and (terminated[i] or truncated[i]):
-                        infos = self._add_info(infos, {"final_obs": obs, "final_info": info}, i)
-                        obs, info = env.reset()
-                self._observations[i] = obs
-                infos = self._add_info(infos, info, i)
-        finally:
-            self.task.__dict__.pop("run", None)  # back to Task.run
+        rewards = np.zeros(self.num_envs, dtype=np.float64)
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        truncated = np.zeros(self.num_envs, dtype=bool)
+        infos: dict = {}
+        for i, obs, reward, ended, cut, info, final in self._step_records(actions, self._autoreset):
+            rewards[i], terminated[i], truncated[i] = reward, ended, cut
+            if final is not None:
+                infos = self._add_info(infos, {"final_obs": final[0], "final_info": final[1]}, i)
+            self._observations[i] = obs
+            infos = self._add_info(infos, info, i)
         if mode is AutoresetMode.NEXT_STEP:
             self._autoreset = terminated | truncated
         elif mode is AutoresetMode.DISABLED:
             self._ended = terminated | truncated
         return self._observations.copy(), rewards, terminated, truncated, infos
 
+    def _step_records(self, actions: np.ndarray, autoreset: np.ndarray) -> list[tuple]:
+        """(i, observation, reward, terminated, truncated, info, final) of every sub-env:
+        stepped, or reset where `autoreset` says (next_step mode); `final` is the (observation,
+        info) that ended an episode in same_step mode, which then resets the sub-env, else None."""
+        if self._shards is not None:
+            return self._from_workers("_step_records", lambda a, b: (actions[a:b], autoreset[a:b]))
+        same_step = self.metadata["autoreset_mode"] is AutoresetMode.SAME_STEP
+        self._run_designs(actions, autoreset)
+        records = []
+        try:
+            for i, env in enumerate(self.envs):
+                if autoreset[i]:  # next_step mode only
+                    obs, info = env.reset()
+                    records.append((i, obs, 0.0, False, False, info, None))
+                    continue
+                obs, reward, ended, cut, info = env.step(actions[i])
+                final = None
+                if same_step and (ended or cut):
+                    final = (obs, info)
+                    obs, info = env.reset()
+                records.append((i, obs, reward, ended, cut, info, final))
+        finally:
+            self.task.__dict__.pop("run", None)  # back to Task.run
+        return records
+
     def render(self) -> Optional[tuple]:
         """One frame per sub-env (render_mode="rgb_array"), as gymnasium's sync vector env gives them."""
         if self.render_mode is None:
             return None
+        if self._shards is not None:
+            return tuple(frame for frames in self._shards.call("render", [()] * len(self._shards.blocks))
+                         for frame in frames)
         return tuple(env.render() for env in self.envs)
 
-    def _run_designs(self, actions: np.ndarray) -> None:
+    def _run_designs(self, actions: np.ndarray, autoreset: np.ndarray) -> None:
         """The tray tests of every sub-env that steps now, in batches: the scene each
         sub-env's `step` will ask for (its action checked as `step` checks it); the shared
         task then hands each sub-env its result in turn, running each batch when its first
         sub-env asks (`_Prefetched`)."""
         task = self.task
         stepping = [i for i, env in enumerate(self.envs)
-                    if not self._autoreset[i] and env._context is not None]  # one that needs a reset fails in step
+                    if not autoreset[i] and env._context is not None]  # one that needs a reset fails in step
         library = batches_library(task.library, [self.envs[i]._batch for i in stepping])
         if not batched(self.envs[0]) or library is None:
             return
@@ -183,7 +234,10 @@ class SpinnerDesignVectorEnv(VectorEnv):
         task.run = _Prefetched(scenes, lambda part: task.run_batch(part, library))  # step() takes them; then Task.run
 
     def close_extras(self, **kwargs: Any):
-        for env in getattr(self, "envs", []):  # also for an instance whose __init__ raised
+        if getattr(self, "_shards", None) is not None:  # getattr: also for an instance whose __init__ raised
+            self._shards.close()
+        first = getattr(self, "_first", None)
+        for env in getattr(self, "envs", None) or ([first] if first is not None else []):
             env.close()
 
 
@@ -260,6 +314,21 @@ def batched(env: SpinnerDesignEnv) -> bool:
     episode's fertilizer copy (`batches_library`)."""
     cfg = env.task.cfg
     return cfg.precision is None and env.render_mode is None
+
+
+def _checked_workers(workers, num_envs: int, first: SpinnerDesignEnv) -> int:
+    """`workers` as a count of processes: 1 to min(num_envs, the threads spreadgym may use),
+    and 1 where the spinner runs on a GPU (one process drives it)."""
+    count = threads.thread_count()
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 1 <= workers <= num_envs:
+        raise ConfigError("workers", f"expected a whole number of processes from 1 to num_envs={num_envs}, "
+                                     f"got {workers!r}")
+    if workers > 1 and (first.task.cfg.device or device.current()) == "cuda":
+        raise ConfigError("workers", "one process drives the GPU: use workers=1 with device='cuda'")
+    if workers > count:
+        raise ConfigError("workers", f"{workers} processes for the {count} threads spreadgym may use here "
+                                     f"(SPREADGYM_THREADS, the cores); allowed: 1 to {count}")
+    return int(workers)
 
 
 def _sharing_task(env: SpinnerDesignEnv) -> SpinnerDesignEnv:

@@ -26,3 +26,16 @@ def test_an_env_on_a_missing_gpu_fails_at_make_in_one_line():
     with pytest.raises(ConfigError, match="device: cuda: no CUDA GPU") as error:
         gym.make("spreadgym/SpinnerDesign-v0", device="cuda")
     assert "\n" not in str(error.value)
+
+
+def test_workers_with_a_gpu_are_refused_in_one_line(cuda_simulator):
+    """One process drives the GPU: the vector env's worker processes are for the CPU."""
+    found = cuda_simulator(
+        "import json, gymnasium as gym, spreadgym\n"
+        "from spreadgym.errors import ConfigError\n"
+        "try:\n"
+        "    gym.make_vec('spreadgym/SpinnerDesign-v1', num_envs=2, workers=2, granules=32, device='cuda')\n"
+        "    print(json.dumps({'error': None}))\n"
+        "except ConfigError as error:\n"
+        "    print(json.dumps({'error': str(error)}))\n")
+    assert found["error"] == "workers: one process drives the GPU: use workers=1 with device='cuda'"

@@ -1,0 +1,165 @@
+"""Blocks of a vector env's sub-envs in worker processes: `Shards`.
+
+Why processes: a SpinnerDesign step is ~90 % compiled kernels that run on every thread and
+~10 % Python (planning, packing, the results' objects) that runs on one, because it holds
+the GIL; on many cores that tenth bounds a process (docs/performance.md, the 16-core
+figures). Each worker runs its block of sub-envs as a whole vector env of its own, batch
+and threads included, so the Python of the blocks runs side by side. The threads are
+shared out: the workers' counts add up to `threads.thread_count()`, so processes and
+threads never multiply.
+
+Workers are fresh interpreters (the "spawn" start: nothing of the parent's threads or
+numba state is inherited), so a script that makes such an env needs the usual
+`if __name__ == "__main__":` guard. Each worker's sub-envs are built from the same keyword
+arguments as the parent's; their results do not depend on which process or how many
+threads compute them (every design is computed alone), so the bits equal one process's.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import pickle
+import traceback
+from multiprocessing.connection import Connection
+from typing import Any, Optional
+
+import numpy as np
+
+from spreadgym import threads
+
+_START = multiprocessing.get_context("spawn")
+_CLOSE_WAIT_S = 10.0  # a worker still running this long after "close" is terminated
+
+
+def blocks(num_envs: int, workers: int) -> list[tuple[int, int]]:
+    """[first, stop) sub-env indices of each worker: contiguous, sizes differing by one at most."""
+    sizes = [num_envs // workers + (w < num_envs % workers) for w in range(workers)]
+    stops = np.cumsum(sizes).tolist()
+    return [(stop - size, stop) for stop, size in zip(stops, sizes)]
+
+
+def thread_shares(workers: int) -> list[int]:
+    """Each worker's threads: `threads.thread_count()` shared out (>= 1 each; callers keep
+    workers <= the count, so the shares add up to it)."""
+    count = threads.thread_count()
+    return [max(1, count // workers + (w < count % workers)) for w in range(workers)]
+
+
+class Shards:
+    """`workers` processes, worker w holding sub-envs blocks(num_envs, workers)[w] as a
+    vector env of its own (`make(num_envs=..., **kwargs)` there). `call(name, per_block)`
+    runs that method on every worker at once and returns their answers in order."""
+
+    def __init__(self, make, num_envs: int, workers: int, kwargs: dict[str, Any]):
+        self.blocks = blocks(num_envs, workers)
+        self._pipes: list[Connection] = []
+        self._processes: list = []
+        try:
+            for (first, stop), share in zip(self.blocks, thread_shares(workers)):
+                ours, theirs = _START.Pipe()
+                process = _START.Process(target=_serve, args=(theirs, make, stop - first, share, kwargs),
+                                         daemon=True, name=f"spreadgym-vector-worker-{len(self._pipes)}")
+                process.start()
+                theirs.close()
+                self._pipes.append(ours)
+                self._processes.append(process)
+            every = list(range(workers))
+            self._answers(every, workers, {})  # each worker built its sub-envs, else their first error is raised
+        except BaseException:
+            self.close()
+            raise
+
+    def call(self, name: str, per_block: list[Optional[tuple]]) -> list:
+        """Worker w runs `env.<name>(*per_block[w])` (None: w sits this call out); the answers
+        in order (None for those that sat out). The first worker error is raised once every
+        asked worker has answered, so the pipes stay in step."""
+        asked = [w for w, args in enumerate(per_block) if args is not None]
+        failed: dict[int, BaseException] = {}
+        for w in asked:
+            try:
+                self._pipes[w].send((name, per_block[w]))
+            except OSError:
+                failed[w] = _gone(w)
+        return self._answers(asked, len(per_block), failed)
+
+    def _answers(self, asked: list[int], size: int, failed: dict[int, BaseException]) -> list:
+        """Each asked worker's answer (those in `failed` already failed), then the first error raised."""
+        answers: list = [None] * size
+        for w in asked:
+            if w in failed:
+                continue
+            try:
+                kind, value = self._pipes[w].recv()
+            except (EOFError, OSError):
+                kind, value = "error", _gone(w)
+            if kind == "ok":
+                answers[w] = value
+            else:
+                failed[w] = value
+        if failed:
+            raise failed[min(failed)]
+        return answers
+
+    def close(self) -> None:
+        """Stop every worker (closing their sub-envs), waiting _CLOSE_WAIT_S at most."""
+        for pipe in self._pipes:
+            try:
+                pipe.send(("close", ()))
+            except OSError:
+                pass  # already gone
+        for process in self._processes:
+            process.join(_CLOSE_WAIT_S)
+            if process.is_alive():
+                process.terminate()
+                process.join()
+        for pipe in self._pipes:
+            pipe.close()
+        self._pipes, self._processes = [], []
+
+
+def _serve(pipe: Connection, make, num_envs: int, share: int, kwargs: dict) -> None:
+    """A worker's loop: build the block's vector env with `share` threads, then answer each
+    (method, args) with ("ok", result) or ("error", exception) until "close"."""
+    threads.set_threads(share)
+    env = None
+    try:
+        try:
+            env = make(num_envs=num_envs, **kwargs)
+            answer: tuple = ("ok", None)
+        except Exception as error:  # noqa: BLE001 (the parent raises it)
+            answer = ("error", _portable(error))
+        while True:
+            try:
+                pipe.send(answer)
+            except (pickle.PicklingError, TypeError, AttributeError) as error:  # nothing was sent
+                pipe.send(("error", RuntimeError(f"a vector env worker's answer does not pickle: {error}")))
+            if env is None:
+                return
+            name, args = pipe.recv()
+            if name == "close":
+                return
+            try:
+                answer = ("ok", getattr(env, name)(*args))
+            except Exception as error:  # noqa: BLE001 (the parent raises it)
+                answer = ("error", _portable(error))
+    except (EOFError, OSError, KeyboardInterrupt):
+        return  # the parent has gone, or was interrupted
+    finally:
+        if env is not None:
+            env.close()
+
+
+def _gone(worker: int) -> RuntimeError:
+    return RuntimeError(f"vector env worker {worker} stopped without an answer (killed, or out of memory?)")
+
+
+def _portable(error: Exception) -> Exception:
+    """`error` with the worker's traceback as a note (shown in the parent's traceback, not
+    in its message), or, where it does not pickle, a RuntimeError naming it."""
+    if hasattr(error, "add_note"):  # Python 3.11 on
+        error.add_note("in a vector env worker process:\n" + "".join(traceback.format_exception(error)).rstrip())
+    try:
+        pickle.loads(pickle.dumps(error))
+        return error
+    except Exception:  # noqa: BLE001 (any pickling failure)
+        return RuntimeError(f"{type(error).__name__}: {error}")

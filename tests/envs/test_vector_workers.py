@@ -1,0 +1,199 @@
+"""The native vector env's `workers` (envs/shards.py): blocks of sub-envs in worker
+processes give, bit for bit, what one process gives; bad counts, worker errors and a
+killed worker each end in one line. Each env with workers starts fresh interpreters
+(~1.5 s here), so there are few of them."""
+
+import math
+import multiprocessing
+import os
+import signal
+import threading
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import spreadgym  # noqa: F401  (registers the ids)
+from spreadgym import threads
+from spreadgym.envs import shards
+from spreadgym.errors import ConfigError
+
+ID = "spreadgym/SpinnerDesign-v1"
+SMALL = {"granules": 48}
+
+
+@pytest.fixture(autouse=True)
+def _two_threads(monkeypatch):
+    """Two threads whatever the machine: two workers of one thread each (inherited by the workers)."""
+    monkeypatch.setenv(threads.ENV_VAR, "2")
+
+
+def _same(a, b, path="") -> None:
+    """a and b equal to the bit: arrays by dtype, shape and bytes, objects element by element."""
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for key in a:
+            _same(a[key], b[key], f"{path}/{key}")
+    elif isinstance(a, (tuple, list)):
+        assert type(a) is type(b) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{path}[{i}]")
+    elif isinstance(a, np.ndarray):
+        assert isinstance(b, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape, path
+        if a.dtype == object:
+            for i, (x, y) in enumerate(zip(a.ravel(), b.ravel())):
+                _same(x, y, f"{path}[{i}]")
+        else:
+            assert a.tobytes() == b.tobytes(), path
+    elif isinstance(a, float):
+        assert type(b) is float and (a == b or math.isnan(a) and math.isnan(b)), (path, a, b)
+    else:
+        assert type(a) is type(b) and a == b, (path, a, b)
+
+
+def _rollout(mode: str, workers: int) -> list:
+    """reset, three steps and a masked reset of 5 sub-envs (blocks of 3 and 2 with two workers)."""
+    venv = gym.make_vec(ID, num_envs=5, autoreset_mode=mode, workers=workers, **SMALL)
+    try:
+        rng = np.random.default_rng(4)
+        out = [venv.reset(seed=30)]
+        for _ in range(3):
+            out.append(venv.step(rng.uniform(-1, 1, (5, 2)).astype(np.float32)))
+            if mode == "disabled":  # every episode ends after one step: reset them all, the last two first
+                out.append(venv.reset(seed=[None, None, None, 7, 8],
+                                      options={"reset_mask": np.array([False, False, False, True, True])}))
+                out.append(venv.reset(seed=[1, 2, 3, None, None],
+                                      options={"reset_mask": np.array([True, True, True, False, False])}))
+        out.append(venv.reset(seed=[None, 50, None, None, 51],
+                              options={"reset_mask": np.array([False, True, False, False, True])}))
+        return out
+    finally:
+        venv.close()
+
+
+@pytest.mark.parametrize("mode", ["same_step", "next_step", "disabled"])
+def test_workers_give_one_process_bits(mode):
+    _same(_rollout(mode, 1), _rollout(mode, 2))
+
+
+def test_frames_come_back_one_per_sub_env_in_order():
+    frames = []
+    for workers in (1, 2):
+        venv = gym.make_vec(ID, num_envs=2, render_mode="rgb_array", workers=workers,
+                            **{**SMALL, "render.width_px": 64, "render.height_px": 64})
+        try:
+            venv.reset(seed=0)
+            venv.step(np.array([[0.5, -0.5], [-0.5, 0.5]], dtype=np.float32))
+            frames.append(venv.render())
+        finally:
+            venv.close()
+    _same(frames[0], frames[1])
+
+
+@pytest.mark.parametrize("bad", [0, -1, 6, 2.0, True, "2", None])
+def test_a_bad_worker_count_is_a_one_line_error_before_any_process_starts(bad):
+    with pytest.raises(ConfigError) as err:
+        gym.make_vec(ID, num_envs=5, workers=bad, **SMALL)
+    assert str(err.value).startswith("workers:") and "\n" not in str(err.value)
+    assert not multiprocessing.active_children()
+
+
+def test_workers_beyond_the_threads_are_refused(monkeypatch):
+    monkeypatch.setenv(threads.ENV_VAR, "1")
+    with pytest.raises(ConfigError, match=r"workers: 2 processes for the 1 threads .* allowed: 1 to 1"):
+        gym.make_vec(ID, num_envs=4, workers=2, **SMALL)
+
+
+def test_a_worker_error_reaches_the_step_as_in_one_process_and_the_env_works_on():
+    nan = np.array([[0.0, 0.0], [0.0, 0.0], [np.nan, 0.0]], dtype=np.float32)  # the bad row in the second block
+    errors = []
+    for workers in (1, 2):
+        venv = gym.make_vec(ID, num_envs=3, autoreset_mode="same_step", workers=workers, **SMALL)
+        try:
+            venv.reset(seed=0)
+            with pytest.raises(Exception) as err:
+                venv.step(nan)
+            errors.append(err.value)
+            venv.reset(seed=0)
+            _, rewards, *_ = venv.step(np.zeros((3, 2), dtype=np.float32))
+            assert np.all(np.isfinite(rewards))
+        finally:
+            venv.close()
+    assert type(errors[1]) is type(errors[0]) and str(errors[1]) == str(errors[0])
+    assert "\n" not in str(errors[1])
+    assert any("in a vector env worker process" in note for note in getattr(errors[1], "__notes__", []))
+
+
+def test_a_killed_worker_is_a_one_line_error_and_close_returns():
+    venv = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", workers=2, **SMALL)
+    try:
+        venv.reset(seed=0)
+        victim = venv.unwrapped._shards._processes[1]
+        os.kill(victim.pid, signal.SIGKILL)
+        victim.join(10)
+        with pytest.raises(RuntimeError, match="vector env worker 1 stopped without an answer") as err:
+            venv.step(np.zeros((2, 2), dtype=np.float32))
+        assert "\n" not in str(err.value)
+    finally:
+        venv.close()
+    assert not multiprocessing.active_children()
+
+
+def test_blocks_are_contiguous_and_the_thread_shares_add_up(monkeypatch):
+    assert shards.blocks(5, 2) == [(0, 3), (3, 5)]
+    assert shards.blocks(64, 3) == [(0, 22), (22, 43), (43, 64)]
+    for count, workers in [(2, 2), (16, 3), (16, 16), (7, 4)]:
+        monkeypatch.setenv(threads.ENV_VAR, str(count))
+        shares = shards.thread_shares(workers)
+        assert sum(shares) == count and max(shares) - min(shares) <= 1 and min(shares) >= 1
+
+
+class _Probe:
+    """A stand-in for a worker's vector env: what the worker loop sets up and hands back."""
+
+    last_closed = False
+
+    def __init__(self, num_envs: int, fail: bool = False):
+        if fail:
+            raise ConfigError("granules", "expected >= 1, got 0")
+        self.num_envs = num_envs
+
+    def threads(self):
+        return self.num_envs, threads.thread_count()
+
+    def fails(self):
+        raise ValueError("no such design")
+
+    def unpicklable(self):
+        return lambda: None
+
+    def close(self):
+        type(self).last_closed = True
+
+
+def test_the_worker_loop_sets_its_threads_hands_back_errors_and_closes():
+    ours, theirs = multiprocessing.Pipe()
+    loop = threading.Thread(target=shards._serve, args=(theirs, _Probe, 3, 5, {}))
+    loop.start()
+    try:
+        assert ours.recv() == ("ok", None)
+        ours.send(("threads", ()))
+        assert ours.recv() == ("ok", (3, 5))  # the worker's share of threads
+        ours.send(("fails", ()))
+        kind, error = ours.recv()
+        assert kind == "error" and isinstance(error, ValueError) and str(error) == "no such design"
+        assert "in a vector env worker process" in error.__notes__[0]
+        ours.send(("unpicklable", ()))
+        kind, error = ours.recv()
+        assert kind == "error" and isinstance(error, RuntimeError) and "does not pickle" in str(error)
+        ours.send(("close", ()))
+        loop.join(10)
+        assert not loop.is_alive() and _Probe.last_closed
+    finally:
+        threads.set_threads(None)
+    failing = threading.Thread(target=shards._serve, args=(theirs, _Probe, 1, 1, {"fail": True}))
+    failing.start()
+    kind, error = ours.recv()
+    failing.join(10)
+    assert kind == "error" and isinstance(error, ConfigError) and str(error) == "granules: expected >= 1, got 0"
+    threads.set_threads(None)
