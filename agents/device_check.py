@@ -17,7 +17,9 @@ cut short still returns what it did):
        outside the compiled model's validated envelope, where "auto" runs pymunk;
    (b) the native SpinnerDesign vector env (`gym.make_vec(..., autoreset_mode="same_step")`)
        with `--batch` sub-envs;
-   checking that tray masses (a) and rewards and observations (b) are bit-identical to
+   (c) above one thread, that vector env in as many worker processes as threads, one
+       thread each (`workers`);
+   checking that tray masses (a) and rewards and observations (b, c) are bit-identical to
    the one-thread run's. Where the vector env refuses more than 61 sub-envs of the default
    2048-granule, 32-copy scene (`config.scene.MAX_GRANULE_COPIES`, a memory guard, in the
    code before its steps ran in parts), this process raises that guard for the benchmark
@@ -206,16 +208,19 @@ def others(name: str, count: int, granules: Optional[int] = None):
 GUARD_RAISED = []  # the sizes at which the vector env's memory guard had to be raised
 
 
-def vector_env(num_envs: int, device: Optional[str] = None, granules: Optional[int] = None):
-    """The SpinnerDesign vector env as shipped; where it refuses `num_envs` for memory (the
-    code that ran a step as one batch), with that guard raised in this process (docstring)."""
+def vector_env(num_envs: int, device: Optional[str] = None, granules: Optional[int] = None, workers: int = 1):
+    """The SpinnerDesign vector env as shipped (in `workers` processes); where it refuses
+    `num_envs` for memory (the code that ran a step as one batch), with that guard raised
+    in this process (docstring)."""
     import gymnasium as gym
 
     import spreadgym  # noqa: F401  (registers the ids)
     from spreadgym.config import scene as scene_config
     from spreadgym.errors import ConfigError
 
-    kwargs = {} if device is None else {"device": device}
+    kwargs: dict = {} if device is None else {"device": device}
+    if workers > 1:
+        kwargs["workers"] = workers
     if granules is not None:
         kwargs["granules"] = granules
     try:
@@ -269,21 +274,6 @@ def stage_timers():
         for name, function in saved.items():
             setattr(batch_module, name, function)
         SpinnerModel.run_batch = spinner
-
-
-@contextmanager
-def finish_way(mode: Optional[str]):
-    """None: the code as it is; "scene": every design through `finish_scene` (`batch.is_plain`
-    answering no: the finish before plain_finish, the same bits)."""
-    from spreadgym.spread import batch as batch_module
-
-    plain = batch_module.is_plain
-    try:
-        if mode == "scene":
-            batch_module.is_plain = lambda plan: False
-        yield
-    finally:
-        batch_module.is_plain = plain
 
 
 def staged_batch(scenes, library, ci: bool = False) -> tuple[list, dict]:
@@ -440,57 +430,56 @@ def cpu_main(args) -> None:
 
 def scaling_rows(n: int, args, scenes, library, venv, reference: dict, table: Table, until: float,
                  work: Path) -> None:
-    """Designs/s of run_batch (mixed scenes) and of the vector env at `n` threads, their
-    blocks interleaved: a warm-up block, then `args.repeats` timed ones; bits against 1 thread."""
-    from spreadgym.spread import batch as batch_module
+    """Designs/s of run_batch (mixed scenes), of the vector env and, above one thread, of
+    the vector env in `n` worker processes of one thread each (`workers`, envs/shards.py)
+    at `n` threads, their blocks interleaved: a warm-up block, then `args.repeats` timed
+    ones; bits against 1 thread. Every block resets each env with its own seed and steps
+    it with its own actions, alike for both envs, so results compare across thread counts."""
     from spreadgym.spread.batch import run_batch
 
-    # at 8 threads and more, the same blocks also with every design through finish_scene
-    # (the finish before plain_finish, the same bits): an A/B on the one machine. Every
-    # block resets the vector env with its own seed and steps it with its own actions, each
-    # way alike, so its results compare across ways and thread counts
-    ways = [("", None)]
-    if n >= 8 and hasattr(batch_module, "is_plain"):
-        ways += [(", finish_scene", "scene")]
-    rates: dict = {f"{what}{tag}": [] for tag, _ in ways for what in ("run_batch mixed", "vector env")}
-    rewards: dict = {tag: [] for tag, _ in ways}
+    envs = {"vector env": venv}
+    spread = None
+    if venv is not None and n > 1:
+        with section(f"{n} worker processes start", 120):
+            spread = vector_env(args.batch, workers=n)
+        envs[f"vector env, {n} workers"] = spread
+    rates: dict = {what: [] for what in ("run_batch mixed", *envs)}
+    rewards: dict = {what: [] for what in envs}
     last, block_s = None, 0.0
-    for block in range(args.repeats + 1):
-        if block > 1 and time.time() + block_s > until:
-            break
-        began = time.perf_counter()
-        actions = None
-        if venv is not None:
-            venv.action_space.seed(block)
-            actions = venv.action_space.sample()
-        for tag, mode in ways:
-            with finish_way(mode):
+    try:
+        for block in range(args.repeats + 1):
+            if block > 1 and time.time() + block_s > until:
+                break
+            began = time.perf_counter()
+            start = time.perf_counter()
+            last = run_batch(scenes, library=library, ci=False)
+            if block:
+                rates["run_batch mixed"].append(args.batch / (time.perf_counter() - start))
+            for what, env in envs.items():
+                if env is None:
+                    continue
+                env.action_space.seed(block)
+                actions = env.action_space.sample()
+                env.reset(seed=1000 * block)
                 start = time.perf_counter()
-                found = run_batch(scenes, library=library, ci=False)
+                obs, reward, *_ = env.step(actions)
                 if block:
-                    rates[f"run_batch mixed{tag}"].append(args.batch / (time.perf_counter() - start))
-                if mode is None:
-                    last = found
-                if venv is not None:
-                    venv.reset(seed=1000 * block)
-                    start = time.perf_counter()
-                    obs, reward, *_ = venv.step(actions)
-                    if block:
-                        rates[f"vector env{tag}"].append(args.batch / (time.perf_counter() - start))
-                    rewards[tag].append((obs.copy(), reward.copy()))
-        block_s = time.perf_counter() - began
+                    rates[what].append(args.batch / (time.perf_counter() - start))
+                rewards[what].append((obs.copy(), reward.copy()))
+            block_s = time.perf_counter() - began
+    finally:
+        if spread is not None:
+            spread.close()
     masses = [r.replicate_masses_kg for r in last]
     reference.setdefault("masses", masses)
-    reference.setdefault("rewards", rewards[""])
+    reference.setdefault("rewards", rewards.get("vector env"))
 
     def equal(found: list) -> bool:  # observations and rewards, block by block, as at the first thread count
         return all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
-                   for a, b in zip(found, reference["rewards"]))
+                   for a, b in zip(found, reference["rewards"] or []))
 
     same = {"run_batch mixed": all(np.array_equal(a, b) for a, b in zip(masses, reference["masses"])),
-            "vector env": equal(rewards[""]),
-            "run_batch mixed, finish_scene": None,  # its designs' masses are not kept: the env's check stands for it
-            "vector env, finish_scene": equal(rewards.get(", finish_scene", []))}
+            **{what: equal(found) for what, found in rewards.items()}}
     for what, found in rates.items():
         if not found:
             continue

@@ -304,8 +304,8 @@ def vector_env_steps_per_second(batch: int = 64, vector_steps: int = 2, repeats:
 def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
     """Designs per second evaluated one by one and as batches (spreadgym.spread.batch), at
     one thread and at every thread spreadgym may use: SpinnerDesign's single env against
-    its native vector env at `batch` sub-envs (default config, paper scene), and
-    `run_scene` calls against one `run_batch` on paper, field and twin-field scenes of
+    its native vector env at `batch` sub-envs (default config, paper scene; also in one
+    worker process per thread, `workers`), and `run_scene` calls against one `run_batch` on paper, field and twin-field scenes of
     mixed settings. Each figure is the median of `repeats` blocks of `batch` designs, with
     the blocks' range; the series' blocks are interleaved so that a shared machine's load
     falls on all of them alike. Ratios are to the one-by-one figure at one thread."""
@@ -329,8 +329,20 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
 
     ways = {("SpinnerDesign, one env", 1): single_block,
             (f"SpinnerDesignVectorEnv ({batch})", batch): lambda: venv.step(venv.action_space.sample())}
-    rows, _ = interleaved_rates({(name, size, n): run for (name, size), run in ways.items()
-                                 for n in sorted({1, everything})}, batch, repeats)
+    series = {(name, size, n): run for (name, size), run in ways.items() for n in sorted({1, everything})}
+    spread = None
+    if everything > 1:  # a worker process per thread, each with one (envs/shards.py)
+        spread = gym.make_vec("spreadgym/SpinnerDesign-v0", num_envs=batch, autoreset_mode="same_step",
+                              workers=everything)
+        spread.reset(seed=0)
+        spread.action_space.seed(0)
+        series[(f"SpinnerDesignVectorEnv ({batch}), {everything} workers", batch, everything)] = (
+            lambda: spread.step(spread.action_space.sample()))
+    try:
+        rows, _ = interleaved_rates(series, batch, repeats)
+    finally:
+        if spread is not None:
+            spread.close()
     venv.close()
     env.close()
     core = batch_series(batch, repeats)
