@@ -17,17 +17,20 @@ from typing import Optional
 
 import gymnasium as gym
 
+from spreadgym import threads
 from spreadgym.agents.run_config import RunConfig
 from spreadgym.errors import SpreadgymError
 
 
-def worker_env(env_id: str, error_dir: Optional[str] = None, **env_kwargs):
-    """Make one env; in a worker process, leave Ctrl-C and SIGTERM to the trainer, and
-    write any exception's one-line message to `error_dir` before the worker dies, so
-    the trainer can say it (`worker_failure`)."""
+def worker_env(env_id: str, error_dir: Optional[str] = None, threads_each: Optional[int] = None, **env_kwargs):
+    """Make one env; in a worker process, leave Ctrl-C and SIGTERM to the trainer, use
+    `threads_each` threads (None: spreadgym's default), and write any exception's one-line
+    message to `error_dir` before the worker dies, so the trainer can say it (`worker_failure`)."""
     if multiprocessing.parent_process() is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    if threads_each is not None:
+        threads.set_threads(threads_each)
     try:
         env = gym.make(env_id, **env_kwargs)
     except Exception as exc:
@@ -99,14 +102,16 @@ WORKER_GONE = (EOFError, BrokenPipeError, ConnectionResetError)  # what SubprocV
 
 def make_training_env(cfg: RunConfig, error_dir: Optional[str] = None):
     """The vector env of the run: SubprocVecEnv for n_envs > 1 (workers record their
-    failures in `error_dir`), else DummyVecEnv."""
+    failures in `error_dir`; spreadgym's threads shared out among them, so that processes
+    and threads do not multiply), else DummyVecEnv."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     n = cfg.n_envs
     vec_cls = SubprocVecEnv if n > 1 else DummyVecEnv
+    share = max(1, threads.thread_count() // n) if n > 1 else None
     try:
-        return make_vec_env(partial(worker_env, cfg.env, error_dir if n > 1 else None), n_envs=n, seed=cfg.seed,
+        return make_vec_env(partial(worker_env, cfg.env, error_dir if n > 1 else None, share), n_envs=n, seed=cfg.seed,
                             env_kwargs=cfg.env_kwargs, vec_env_cls=vec_cls)
     except WORKER_GONE:
         if error_dir is None:
