@@ -23,8 +23,8 @@ docs/benchmark.md has every rung's rates.
 near-equal size, each block a vector env of its own with its share of the threads
 (envs/shards.py): the Python around each batch, one thread's work in one process, then
 runs P at a time. Same bits as one process; P at most the threads spreadgym may use, and 1
-on a GPU. Two workers of one thread gave 1.10x one process of two threads on two cores
-(docs/performance.md).
+on a GPU. Two workers of one thread gave 1.08-1.10x one process of two threads on two
+cores (docs/performance.md).
 
 Size: any `num_envs`. A step runs its designs in batches of at most MAX_GRANULE_COPIES
 landing points (sim.granules x sim.angle_copies x discs per design: `spreadgym simulate`'s
@@ -86,7 +86,8 @@ class SpinnerDesignVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self._first = first
         self._shards: Optional[Shards] = None
-        if _checked_workers(workers, self.num_envs, first) == 1:
+        workers = _checked_workers(workers, self.num_envs, first)
+        if workers == 1:
             self.envs = [first] + [_sharing_task(first) for _ in range(self.num_envs - 1)]
         else:
             self.envs = []  # they live in the workers

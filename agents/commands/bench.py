@@ -305,10 +305,11 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
     """Designs per second evaluated one by one and as batches (spreadgym.spread.batch), at
     one thread and at every thread spreadgym may use: SpinnerDesign's single env against
     its native vector env at `batch` sub-envs (default config, paper scene; also in one
-    worker process per thread, `workers`), and `run_scene` calls against one `run_batch` on paper, field and twin-field scenes of
-    mixed settings. Each figure is the median of `repeats` blocks of `batch` designs, with
-    the blocks' range; the series' blocks are interleaved so that a shared machine's load
-    falls on all of them alike. Ratios are to the one-by-one figure at one thread."""
+    worker process per thread, `workers`), and `run_scene` calls against one `run_batch`
+    on paper, field and twin-field scenes of mixed settings. Each figure is the median of
+    `repeats` blocks of `batch` designs, with the blocks' range; the series' blocks are
+    interleaved so that a shared machine's load falls on all of them alike. Ratios are to
+    the one-by-one figure at one thread."""
     import gymnasium as gym
 
     from spreadgym import threads
