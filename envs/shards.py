@@ -64,7 +64,7 @@ class Shards:
                 self._pipes.append(ours)
                 self._processes.append(process)
             every = list(range(workers))
-            self._answers(every, workers, {})  # each worker built its sub-envs, else their first error is raised
+            self._answers(every, workers, {}, starting=True)  # each built its sub-envs, else the first error
         except BaseException:
             self.close()
             raise
@@ -82,7 +82,7 @@ class Shards:
                 failed[w] = _gone(w)
         return self._answers(asked, len(per_block), failed)
 
-    def _answers(self, asked: list[int], size: int, failed: dict[int, BaseException]) -> list:
+    def _answers(self, asked: list[int], size: int, failed: dict[int, BaseException], starting: bool = False) -> list:
         """Each asked worker's answer (those in `failed` already failed), then the first error raised."""
         answers: list = [None] * size
         for w in asked:
@@ -91,7 +91,7 @@ class Shards:
             try:
                 kind, value = self._pipes[w].recv()
             except (EOFError, OSError):
-                kind, value = "error", _gone(w)
+                kind, value = "error", _gone(w, starting)
             if kind == "ok":
                 answers[w] = value
             else:
@@ -149,7 +149,10 @@ def _serve(pipe: Connection, make, num_envs: int, share: int, kwargs: dict) -> N
             env.close()
 
 
-def _gone(worker: int) -> RuntimeError:
+def _gone(worker: int, starting: bool = False) -> RuntimeError:
+    if starting:  # most often a script without the guard: the spawned worker re-ran it and refused to start another
+        return RuntimeError(f"vector env worker {worker} stopped while starting (its error is on stderr); a script "
+                            "that makes an env with workers needs `if __name__ == \"__main__\":` around it")
     return RuntimeError(f"vector env worker {worker} stopped without an answer (killed, or out of memory?)")
 
 

@@ -7,6 +7,8 @@ import math
 import multiprocessing
 import os
 import signal
+import subprocess
+import sys
 import threading
 
 import gymnasium as gym
@@ -137,6 +139,19 @@ def test_a_killed_worker_is_a_one_line_error_and_close_returns():
     finally:
         venv.close()
     assert not multiprocessing.active_children()
+
+
+def test_a_script_without_the_main_guard_is_told_what_it_needs(tmp_path):
+    """Spawned workers re-run the parent's script: without the guard each refuses to start
+    another process and dies, and the parent says why instead of a bare broken pipe."""
+    script = tmp_path / "no_guard.py"
+    script.write_text("import gymnasium as gym, spreadgym\n"
+                      f"gym.make_vec({ID!r}, num_envs=2, workers=2, granules=32).close()\n", encoding="utf-8")
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines()[-1] == (
+        'RuntimeError: vector env worker 0 stopped while starting (its error is on stderr); a script that makes '
+        'an env with workers needs `if __name__ == "__main__":` around it')
 
 
 def test_blocks_are_contiguous_and_the_thread_shares_add_up(monkeypatch):
