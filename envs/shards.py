@@ -19,13 +19,15 @@ from __future__ import annotations
 
 import multiprocessing
 import pickle
+import signal
 import traceback
 from multiprocessing.connection import Connection
+from multiprocessing.reduction import ForkingPickler
 from typing import Any, Optional
 
 import numpy as np
 
-from spreadgym import threads
+from spreadgym import device, threads
 
 _START = multiprocessing.get_context("spawn")
 _CLOSE_WAIT_S = 10.0  # a worker still running this long after "close" is terminated
@@ -47,37 +49,43 @@ def thread_shares(workers: int) -> list[int]:
 
 class Shards:
     """`workers` processes, worker w holding sub-envs blocks(num_envs, workers)[w] as a
-    vector env of its own (`make(num_envs=..., **kwargs)` there). `call(name, per_block)`
-    runs that method on every worker at once and returns their answers in order."""
+    vector env of its own (`make(num_envs=..., **kwargs)` there, on `device_name` with its
+    share of the threads). `call(name, per_block)` runs that method on every worker at once
+    and returns their answers in order."""
 
-    def __init__(self, make, num_envs: int, workers: int, kwargs: dict[str, Any]):
+    def __init__(self, make, num_envs: int, workers: int, device_name: str, kwargs: dict[str, Any]):
         self.blocks = blocks(num_envs, workers)
         self._pipes: list[Connection] = []
         self._processes: list = []
+        self._owed: set[int] = set()  # workers whose answer to an interrupted call is still in their pipe
         try:
             for (first, stop), share in zip(self.blocks, thread_shares(workers)):
                 ours, theirs = _START.Pipe()
-                process = _START.Process(target=_serve, args=(theirs, make, stop - first, share, kwargs),
+                process = _START.Process(target=_serve, args=(theirs, make, stop - first, share, device_name, kwargs),
                                          daemon=True, name=f"spreadgym-vector-worker-{len(self._pipes)}")
                 process.start()
                 theirs.close()
                 self._pipes.append(ours)
                 self._processes.append(process)
-            every = list(range(workers))
-            self._answers(every, workers, {}, starting=True)  # each built its sub-envs, else the first error
+            self._answers(list(range(workers)), workers, {}, starting=True)  # built, or the first error raised
         except BaseException:
             self.close()
             raise
 
     def call(self, name: str, per_block: list[Optional[tuple]]) -> list:
         """Worker w runs `env.<name>(*per_block[w])` (None: w sits this call out); the answers
-        in order (None for those that sat out). The first worker error is raised once every
-        asked worker has answered, so the pipes stay in step."""
+        in order (None for those that sat out). Every message is pickled before any is sent,
+        and the first worker error is raised once every asked worker has answered, so the
+        pipes stay in step; the answers an interrupted call left (Ctrl-C in this process)
+        are read and dropped first."""
+        self._drain()
         asked = [w for w, args in enumerate(per_block) if args is not None]
+        messages = {w: ForkingPickler.dumps((name, per_block[w])) for w in asked}
         failed: dict[int, BaseException] = {}
         for w in asked:
             try:
-                self._pipes[w].send((name, per_block[w]))
+                self._pipes[w].send_bytes(messages[w])
+                self._owed.add(w)
             except OSError:
                 failed[w] = _gone(w)
         return self._answers(asked, len(per_block), failed)
@@ -91,7 +99,8 @@ class Shards:
             try:
                 kind, value = self._pipes[w].recv()
             except (EOFError, OSError):
-                kind, value = "error", _gone(w, starting)
+                kind, value = "error", _gone(w, self._processes[w] if starting else None)
+            self._owed.discard(w)
             if kind == "ok":
                 answers[w] = value
             else:
@@ -99,6 +108,15 @@ class Shards:
         if failed:
             raise failed[min(failed)]
         return answers
+
+    def _drain(self) -> None:
+        """Read and drop the answers an interrupted call left in the pipes."""
+        for w in sorted(self._owed):
+            try:
+                self._pipes[w].recv()
+            except (EOFError, OSError):
+                pass  # gone: the next message to it says so
+            self._owed.discard(w)
 
     def close(self) -> None:
         """Stop every worker (closing their sub-envs), waiting _CLOSE_WAIT_S at most."""
@@ -117,10 +135,14 @@ class Shards:
         self._pipes, self._processes = [], []
 
 
-def _serve(pipe: Connection, make, num_envs: int, share: int, kwargs: dict) -> None:
-    """A worker's loop: build the block's vector env with `share` threads, then answer each
-    (method, args) with ("ok", result) or ("error", exception) until "close"."""
+def _serve(pipe: Connection, make, num_envs: int, share: int, device_name: str, kwargs: dict) -> None:
+    """A worker's loop: build the block's vector env with `share` threads on `device_name`,
+    then answer each (method, args) with ("ok", result) or ("error", exception) until
+    "close". Ctrl-C is the parent's to handle (a terminal sends it to the whole process
+    group), so a worker ignores it and finishes the call it is in."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     threads.set_threads(share)
+    device.set_device(device_name)
     env = None
     try:
         try:
@@ -131,8 +153,9 @@ def _serve(pipe: Connection, make, num_envs: int, share: int, kwargs: dict) -> N
         while True:
             try:
                 pipe.send(answer)
-            except (pickle.PicklingError, TypeError, AttributeError) as error:  # nothing was sent
-                pipe.send(("error", RuntimeError(f"a vector env worker's answer does not pickle: {error}")))
+            except Exception as error:  # noqa: BLE001 (it did not pickle, so nothing was sent)
+                pipe.send(("error", RuntimeError(f"a vector env worker's answer does not pickle: "
+                                                 f"{type(error).__name__}: {error}")))
             if env is None:
                 return
             name, args = pipe.recv()
@@ -142,17 +165,21 @@ def _serve(pipe: Connection, make, num_envs: int, share: int, kwargs: dict) -> N
                 answer = ("ok", getattr(env, name)(*args))
             except Exception as error:  # noqa: BLE001 (the parent raises it)
                 answer = ("error", _portable(error))
-    except (EOFError, OSError, KeyboardInterrupt):
-        return  # the parent has gone, or was interrupted
+    except (EOFError, OSError):
+        return  # the parent has gone
     finally:
         if env is not None:
             env.close()
 
 
-def _gone(worker: int, starting: bool = False) -> RuntimeError:
-    if starting:  # most often a script without the guard: the spawned worker re-ran it and refused to start another
-        return RuntimeError(f"vector env worker {worker} stopped while starting (its error is on stderr); a script "
-                            "that makes an env with workers needs `if __name__ == \"__main__\":` around it")
+def _gone(worker: int, starting=None) -> RuntimeError:
+    """The error for a worker that stopped without an answer; `starting`: its process, when
+    it stopped before its env was built."""
+    if starting is not None:
+        starting.join(5.0)
+        return RuntimeError(f"vector env worker {worker} stopped while starting (exit code {starting.exitcode}; its "
+                            "error is on stderr); a script that makes an env with workers needs "
+                            "`if __name__ == \"__main__\":` around it, or its spawned workers re-run it")
     return RuntimeError(f"vector env worker {worker} stopped without an answer (killed, or out of memory?)")
 
 

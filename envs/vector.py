@@ -52,7 +52,8 @@ from gymnasium.vector.utils import batch_space
 
 from spreadgym import device, threads
 from spreadgym.config.scene import MAX_GRANULE_COPIES, granule_copies
-from spreadgym.envs.common.task import batches_library
+from spreadgym.envs.common.actions import check_action
+from spreadgym.envs.common.task import batches_library, check_reset_options
 from spreadgym.envs.shards import Shards
 from spreadgym.envs.spinner_design import SpinnerDesignEnv
 from spreadgym.errors import ConfigError
@@ -91,7 +92,7 @@ class SpinnerDesignVectorEnv(VectorEnv):
             self.envs = [first] + [_sharing_task(first) for _ in range(self.num_envs - 1)]
         else:
             self.envs = []  # they live in the workers
-            self._shards = Shards(SpinnerDesignVectorEnv, self.num_envs, workers,
+            self._shards = Shards(SpinnerDesignVectorEnv, self.num_envs, workers, _device_of(first),
                                   {"autoreset_mode": mode, "render_mode": render_mode, **kwargs})
         self.metadata = {**self.metadata, "autoreset_mode": MODES[mode]}
         self.render_mode = render_mode
@@ -116,6 +117,8 @@ class SpinnerDesignVectorEnv(VectorEnv):
         seeds = self._seeds(seed)
         options = dict(options) if options else {}
         mask = self._reset_mask(options.pop("reset_mask")) if "reset_mask" in options else None
+        if options:
+            check_reset_options(options)  # here, so that a bad option resets nothing (in one process or in workers)
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))  # the vector env's own np_random, as gymnasium's
         infos: dict = {}
@@ -170,6 +173,8 @@ class SpinnerDesignVectorEnv(VectorEnv):
         if mode is AutoresetMode.DISABLED and self._ended.any():
             raise ValueError(f"sub-envs {np.flatnonzero(self._ended).tolist()} ended their episodes; autoreset is "
                              "disabled: reset them first with reset(options={'reset_mask': mask})")
+        for i in np.flatnonzero(~self._autoreset):  # here, so that a bad action steps nothing (nor do workers)
+            check_action(actions[i], self.task.settings_map.size)
         rewards = np.zeros(self.num_envs, dtype=np.float64)
         terminated = np.zeros(self.num_envs, dtype=bool)
         truncated = np.zeros(self.num_envs, dtype=bool)
@@ -324,12 +329,18 @@ def _checked_workers(workers, num_envs: int, first: SpinnerDesignEnv) -> int:
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 1 <= workers <= num_envs:
         raise ConfigError("workers", f"expected a whole number of processes from 1 to num_envs={num_envs}, "
                                      f"got {workers!r}")
-    if workers > 1 and (first.task.cfg.device or device.current()) == "cuda":
+    if workers > 1 and _device_of(first) == "cuda":
         raise ConfigError("workers", "one process drives the GPU: use workers=1 with device='cuda'")
     if workers > count:
         raise ConfigError("workers", f"{workers} processes for the {count} threads spreadgym may use here "
                                      f"(SPREADGYM_THREADS, the cores); allowed: 1 to {count}")
     return int(workers)
+
+
+def _device_of(env: SpinnerDesignEnv) -> str:
+    """Where `env`'s spinner runs: its `device` keyword, else this process's choice (a
+    spawned worker would read only SPREADGYM_DEVICE)."""
+    return env.task.cfg.device or device.current()
 
 
 def _sharing_task(env: SpinnerDesignEnv) -> SpinnerDesignEnv:

@@ -13,8 +13,8 @@ class ConfigError(SpreadgymError):
         self.message = message
         super().__init__(f"{key}: {message}")
 
-    def __reduce__(self):  # so the error crosses process boundaries (worker pools) intact
-        return type(self), (self.key, self.message)
+    def __reduce__(self):  # so the error crosses process boundaries (worker pools) intact, notes included
+        return type(self), (self.key, self.message), self.__dict__
 
 
 class MaterialError(SpreadgymError):

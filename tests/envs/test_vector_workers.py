@@ -9,7 +9,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 
 import gymnasium as gym
 import numpy as np
@@ -33,7 +32,7 @@ def _two_threads(monkeypatch):
 def _same(a, b, path="") -> None:
     """a and b equal to the bit: arrays by dtype, shape and bytes, objects element by element."""
     if isinstance(a, dict):
-        assert a.keys() == b.keys(), path
+        assert list(a) == list(b), path  # the same keys in the same order
         for key in a:
             _same(a[key], b[key], f"{path}/{key}")
     elif isinstance(a, (tuple, list)):
@@ -106,9 +105,12 @@ def test_workers_beyond_the_threads_are_refused(monkeypatch):
         gym.make_vec(ID, num_envs=4, workers=2, **SMALL)
 
 
-def test_a_worker_error_reaches_the_step_as_in_one_process_and_the_env_works_on():
+def test_a_bad_action_or_option_changes_nothing_and_the_env_steps_on_as_one_process():
+    """The parent checks actions and reset options before any worker runs, so after the
+    error every block is where it was, and the next step (no reset between) has one
+    process's bits."""
     nan = np.array([[0.0, 0.0], [0.0, 0.0], [np.nan, 0.0]], dtype=np.float32)  # the bad row in the second block
-    errors = []
+    errors, after = [], []
     for workers in (1, 2):
         venv = gym.make_vec(ID, num_envs=3, autoreset_mode="same_step", workers=workers, **SMALL)
         try:
@@ -116,14 +118,83 @@ def test_a_worker_error_reaches_the_step_as_in_one_process_and_the_env_works_on(
             with pytest.raises(Exception) as err:
                 venv.step(nan)
             errors.append(err.value)
-            venv.reset(seed=0)
-            _, rewards, *_ = venv.step(np.zeros((3, 2), dtype=np.float32))
-            assert np.all(np.isfinite(rewards))
+            with pytest.raises(ConfigError, match="options.bogus"):
+                venv.reset(options={"bogus": 1})
+            after.append(venv.step(np.full((3, 2), 0.25, dtype=np.float32)))
+            after.append(venv.reset())
         finally:
             venv.close()
     assert type(errors[1]) is type(errors[0]) and str(errors[1]) == str(errors[0])
     assert "\n" not in str(errors[1])
-    assert any("in a vector env worker process" in note for note in getattr(errors[1], "__notes__", []))
+    _same(after[:2], after[2:])
+
+
+def test_an_error_inside_a_worker_keeps_its_type_message_and_traceback(monkeypatch):
+    venv = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", workers=2, **SMALL)
+    try:
+        venv.reset(seed=0)
+        with pytest.raises(ConfigError) as err:
+            venv.reset(seed=0, options={"context": {"target_swath_m": "wide"}})  # checked where the context is drawn
+        assert str(err.value).startswith("options.context") or "target_swath_m" in str(err.value)
+        assert "\n" not in str(err.value)
+        assert any("in a vector env worker process" in note for note in getattr(err.value, "__notes__", []))
+        venv.reset(seed=0)
+        _, rewards, *_ = venv.step(np.zeros((2, 2), dtype=np.float32))
+        assert np.all(np.isfinite(rewards))
+    finally:
+        venv.close()
+
+
+def test_ctrl_c_leaves_the_workers_running_and_the_pipes_in_step():
+    """A terminal's Ctrl-C reaches every process of the group: the workers ignore it and
+    finish their call; a call the parent abandoned leaves its answers, which the next call
+    drops, so each call gets its own answers (one process's bits)."""
+    one = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", **SMALL)
+    two = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", workers=2, **SMALL)
+    try:
+        shards_ = two.unwrapped._shards
+        for process in shards_._processes:
+            os.kill(process.pid, signal.SIGINT)
+        actions = np.array([[0.3, -0.2], [-0.6, 0.1]], dtype=np.float32)
+        for venv in (one, two):
+            venv.reset(seed=9)
+        pipe = shards_._pipes[1]
+        real = type(pipe).recv
+        calls = []
+
+        def interrupted_once(self):
+            if self is pipe and not calls:
+                calls.append(1)
+                raise KeyboardInterrupt
+            return real(self)
+
+        type(pipe).recv = interrupted_once
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                two.step(actions)  # abandoned after worker 0's answer: worker 1's stays in its pipe
+        finally:
+            type(pipe).recv = real
+        one.step(actions)  # what the workers did: both blocks stepped (and reset, same_step)
+        _same(one.step(actions), two.step(actions))
+        _same(one.reset(seed=3), two.reset(seed=3))
+    finally:
+        one.close()
+        two.close()
+
+
+def test_the_workers_run_where_this_process_chose(monkeypatch):
+    """A spawned worker reads the environment, not this process's `set_device`: it is given the device."""
+    from spreadgym import device
+
+    monkeypatch.setenv("SPREADGYM_DEVICE", "cuda")
+    device.set_device("cpu")  # this process's choice wins over the variable (the conftest fixture resets it)
+    venv = gym.make_vec(ID, num_envs=2, workers=2, **SMALL)
+    try:
+        venv.reset(seed=0)
+        _, rewards, *_ = venv.step(np.zeros((2, 2), dtype=np.float32))
+        assert np.all(np.isfinite(rewards))
+    finally:
+        venv.close()
 
 
 def test_a_killed_worker_is_a_one_line_error_and_close_returns():
@@ -149,9 +220,9 @@ def test_a_script_without_the_main_guard_is_told_what_it_needs(tmp_path):
                       f"gym.make_vec({ID!r}, num_envs=2, workers=2, granules=32).close()\n", encoding="utf-8")
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
     assert done.returncode == 1
-    assert done.stderr.strip().splitlines()[-1] == (
-        'RuntimeError: vector env worker 0 stopped while starting (its error is on stderr); a script that makes '
-        'an env with workers needs `if __name__ == "__main__":` around it')
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("RuntimeError: vector env worker 0 stopped while starting (exit code 1; its error is on "
+                           "stderr)") and 'needs `if __name__ == "__main__":` around it' in last
 
 
 def test_blocks_are_contiguous_and_the_thread_shares_add_up(monkeypatch):
@@ -164,17 +235,19 @@ def test_blocks_are_contiguous_and_the_thread_shares_add_up(monkeypatch):
 
 
 class _Probe:
-    """A stand-in for a worker's vector env: what the worker loop sets up and hands back."""
+    """A stand-in for a worker's vector env: what the worker loop sets up and hands back
+    (it lives in the spawned worker; `closed` is a file it writes when closed)."""
 
-    last_closed = False
-
-    def __init__(self, num_envs: int, fail: bool = False):
+    def __init__(self, num_envs: int, closed: str = "", fail: bool = False):
         if fail:
             raise ConfigError("granules", "expected >= 1, got 0")
-        self.num_envs = num_envs
+        self.num_envs, self.closed = num_envs, closed
 
-    def threads(self):
-        return self.num_envs, threads.thread_count()
+    def setup(self):
+        from spreadgym import device
+
+        ignores_ctrl_c = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+        return self.num_envs, threads.thread_count(), device.current(), ignores_ctrl_c
 
     def fails(self):
         raise ValueError("no such design")
@@ -183,17 +256,26 @@ class _Probe:
         return lambda: None
 
     def close(self):
-        type(self).last_closed = True
+        with open(self.closed, "w", encoding="utf-8") as handle:
+            handle.write("closed")
 
 
-def test_the_worker_loop_sets_its_threads_hands_back_errors_and_closes():
-    ours, theirs = multiprocessing.Pipe()
-    loop = threading.Thread(target=shards._serve, args=(theirs, _Probe, 3, 5, {}))
-    loop.start()
+def _worker(probe_kwargs: dict):
+    """A worker process running the loop on a _Probe block of 3 sub-envs, 5 threads, on the CPU."""
+    ours, theirs = shards._START.Pipe()
+    process = shards._START.Process(target=shards._serve, args=(theirs, _Probe, 3, 5, "cpu", probe_kwargs), daemon=True)
+    process.start()
+    theirs.close()
+    return ours, process
+
+
+def test_the_worker_loop_sets_up_its_process_hands_back_errors_and_closes(tmp_path):
+    closed = tmp_path / "closed"
+    ours, process = _worker({"closed": str(closed)})
     try:
         assert ours.recv() == ("ok", None)
-        ours.send(("threads", ()))
-        assert ours.recv() == ("ok", (3, 5))  # the worker's share of threads
+        ours.send(("setup", ()))
+        assert ours.recv() == ("ok", (3, 5, "cpu", True))  # its block, threads, device, and Ctrl-C left alone
         ours.send(("fails", ()))
         kind, error = ours.recv()
         assert kind == "error" and isinstance(error, ValueError) and str(error) == "no such design"
@@ -202,13 +284,12 @@ def test_the_worker_loop_sets_its_threads_hands_back_errors_and_closes():
         kind, error = ours.recv()
         assert kind == "error" and isinstance(error, RuntimeError) and "does not pickle" in str(error)
         ours.send(("close", ()))
-        loop.join(10)
-        assert not loop.is_alive() and _Probe.last_closed
+        process.join(30)
+        assert process.exitcode == 0 and closed.read_text(encoding="utf-8") == "closed"
     finally:
-        threads.set_threads(None)
-    failing = threading.Thread(target=shards._serve, args=(theirs, _Probe, 1, 1, {"fail": True}))
-    failing.start()
+        process.kill()
+    ours, process = _worker({"fail": True})
     kind, error = ours.recv()
-    failing.join(10)
+    process.join(30)
     assert kind == "error" and isinstance(error, ConfigError) and str(error) == "granules: expected >= 1, got 0"
-    threads.set_threads(None)
+    assert "in a vector env worker process" in error.__notes__[0]  # a ConfigError keeps its notes across processes
