@@ -103,7 +103,8 @@ WORKER_GONE = (EOFError, BrokenPipeError, ConnectionResetError)  # what SubprocV
 def make_training_env(cfg: RunConfig, error_dir: Optional[str] = None):
     """The vector env of the run: SubprocVecEnv for n_envs > 1 (workers record their
     failures in `error_dir`; spreadgym's threads shared out among them, so that processes
-    and threads do not multiply), else DummyVecEnv."""
+    and threads do not multiply: one thread each where n_envs exceeds the threads), else
+    DummyVecEnv."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
