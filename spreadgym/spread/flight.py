@@ -186,7 +186,6 @@ def reference_landing(
     rtol: float = 1e-10,
     atol: float = 1e-12,
     spin_rad_s=None,
-    lift: Optional[bool] = None,
 ) -> Landing:
     """The same model solved one granule at a time with scipy's DOP853 and a
     terminal event at z = 0: slow, for tests and benchmarks. With Magnus lift the

@@ -132,9 +132,6 @@ class TurnLaws:
         held = ~(r < np.repeat([clip_test_radius_m(s) for s in scenes], counts))
         return TurnLaws(np.cos(to_feed), np.sin(to_feed), kappa, held)
 
-    def part(self, start: int, stop: int) -> "TurnLaws":
-        return TurnLaws(*(a[start:stop] for a in (self.cos_mu, self.sin_mu, self.kappa, self.held)))
-
 
 def turn_streams(replicate: np.ndarray, first: np.ndarray, seeds: Sequence[int],
                  first_replicates: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
