@@ -97,9 +97,11 @@ class Shards:
             if w in failed:
                 continue
             try:
-                kind, value = self._pipes[w].recv()
+                raw = self._pipes[w].recv_bytes()  # read apart from unpickling: a bad answer is still read
             except (EOFError, OSError):
                 kind, value = "error", _gone(w, self._processes[w] if starting else None)
+            else:
+                kind, value = _unpickled(w, raw)
             self._owed.discard(w)
             if kind == "ok":
                 answers[w] = value
@@ -113,7 +115,7 @@ class Shards:
         """Read and drop the answers an interrupted call left in the pipes."""
         for w in sorted(self._owed):
             try:
-                self._pipes[w].recv()
+                self._pipes[w].recv_bytes()
             except (EOFError, OSError):
                 pass  # gone: the next message to it says so
             self._owed.discard(w)
@@ -170,6 +172,16 @@ def _serve(pipe: Connection, make, num_envs: int, share: int, device_name: str, 
     finally:
         if env is not None:
             env.close()
+
+
+def _unpickled(worker: int, raw: bytes) -> tuple:
+    """A worker's ("ok" | "error", value) from its bytes; one that does not unpickle here
+    (an object whose class this process lacks) is that worker's error."""
+    try:
+        return ForkingPickler.loads(raw)
+    except Exception as error:  # noqa: BLE001 (any unpickling failure)
+        return "error", RuntimeError(f"vector env worker {worker}'s answer does not unpickle here: "
+                                     f"{type(error).__name__}: {error}")
 
 
 def _gone(worker: int, starting=None) -> RuntimeError:

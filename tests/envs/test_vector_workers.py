@@ -156,7 +156,7 @@ def test_ctrl_c_leaves_the_workers_running_and_the_pipes_in_step():
         for venv in (one, two):
             venv.reset(seed=9)
         pipe = shards_._pipes[1]
-        real = type(pipe).recv
+        real = type(pipe).recv_bytes
         calls = []
 
         def interrupted_once(self):
@@ -165,12 +165,12 @@ def test_ctrl_c_leaves_the_workers_running_and_the_pipes_in_step():
                 raise KeyboardInterrupt
             return real(self)
 
-        type(pipe).recv = interrupted_once
+        type(pipe).recv_bytes = interrupted_once
         try:
             with pytest.raises(KeyboardInterrupt):
                 two.step(actions)  # abandoned after worker 0's answer: worker 1's stays in its pipe
         finally:
-            type(pipe).recv = real
+            type(pipe).recv_bytes = real
         one.step(actions)  # what the workers did: both blocks stepped (and reset, same_step)
         _same(one.step(actions), two.step(actions))
         _same(one.reset(seed=3), two.reset(seed=3))
@@ -257,9 +257,19 @@ class _Probe:
     def unpicklable(self):
         return lambda: None
 
+    def unloadable(self):
+        return _Unloadable()
+
     def close(self):
         with open(self.closed, "w", encoding="utf-8") as handle:
             handle.write("closed")
+
+
+class _Unloadable:
+    """Pickles, but does not unpickle (as an object of a class the parent lacks would not)."""
+
+    def __reduce__(self):
+        return int, ("not a number",)
 
 
 def _worker(probe_kwargs: dict):
@@ -295,3 +305,13 @@ def test_the_worker_loop_sets_up_its_process_hands_back_errors_and_closes(tmp_pa
     process.join(30)
     assert kind == "error" and isinstance(error, ConfigError) and str(error) == "granules: expected >= 1, got 0"
     assert "in a vector env worker process" in error.__notes__[0]  # a ConfigError keeps its notes across processes
+
+
+def test_an_answer_that_does_not_unpickle_is_that_workers_error_and_the_pipes_stay_in_step(tmp_path):
+    workers = shards.Shards(_Probe, 2, 2, "cpu", {"closed": str(tmp_path / "closed")})
+    try:
+        with pytest.raises(RuntimeError, match="vector env worker 0's answer does not unpickle here: ValueError"):
+            workers.call("unloadable", [(), None])
+        assert workers.call("setup", [(), ()]) == [(1, 1, "cpu", True)] * 2  # each its own answer, no hang
+    finally:
+        workers.close()
