@@ -110,7 +110,7 @@ def make_training_env(cfg: RunConfig, error_dir: Optional[str] = None):
 
     n = cfg.n_envs
     vec_cls = SubprocVecEnv if n > 1 else DummyVecEnv
-    share = max(1, threads.thread_count() // n) if n > 1 else None
+    share = min(threads.shares(n)) if n > 1 else None  # the same for all: SB3 builds them from one factory
     try:
         return make_vec_env(partial(worker_env, cfg.env, error_dir if n > 1 else None, share), n_envs=n, seed=cfg.seed,
                             env_kwargs=cfg.env_kwargs, vec_env_cls=vec_cls)

@@ -40,13 +40,6 @@ def blocks(num_envs: int, workers: int) -> list[tuple[int, int]]:
     return [(stop - size, stop) for stop, size in zip(stops, sizes)]
 
 
-def thread_shares(workers: int) -> list[int]:
-    """Each worker's threads: `threads.thread_count()` shared out (>= 1 each; callers keep
-    workers <= the count, so the shares add up to it)."""
-    count = threads.thread_count()
-    return [max(1, count // workers + (w < count % workers)) for w in range(workers)]
-
-
 class Shards:
     """`workers` processes, worker w holding sub-envs blocks(num_envs, workers)[w] as a
     vector env of its own (`make(num_envs=..., **kwargs)` there, on `device_name` with its
@@ -59,7 +52,7 @@ class Shards:
         self._processes: list = []
         self._owed: set[int] = set()  # workers whose answer to an interrupted call is still in their pipe
         try:
-            for (first, stop), share in zip(self.blocks, thread_shares(workers)):
+            for (first, stop), share in zip(self.blocks, threads.shares(workers)):
                 ours, theirs = _START.Pipe()
                 process = _START.Process(target=_serve, args=(theirs, make, stop - first, share, device_name, kwargs),
                                          daemon=True, name=f"spreadgym-vector-worker-{len(self._pipes)}")

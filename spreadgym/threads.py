@@ -91,6 +91,15 @@ def _findable_tbb() -> None:
             pass  # the workqueue, as without the wheel
 
 
+def shares(processes: int, count: Optional[int] = None) -> list[int]:
+    """`count` threads (None: `thread_count()`) shared out over `processes` processes, so
+    that the two never multiply: near-equal whole numbers adding up to the count, the first
+    ones one more where it does not divide, and at least one each (more processes than
+    threads: one each)."""
+    count = thread_count() if count is None else count
+    return [max(1, count // processes + (p < count % processes)) for p in range(processes)]
+
+
 def thread_map(work: Callable[[int], T], count: int) -> list[T]:
     """[work(0), ..., work(count - 1)] on up to `thread_count()` threads, the calling one
     among them. For work whose heavy parts release the GIL (compiled kernels, large numpy

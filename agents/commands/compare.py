@@ -111,9 +111,9 @@ def run(args: argparse.Namespace) -> int:
         if args.device == "cuda" and args.workers > 1:  # one process drives the GPU: the two never multiply
             raise SpreadgymError("--device cuda: one process drives the GPU; use --workers 1")
     started = time.perf_counter()
-    from spreadgym.threads import set_threads, thread_count
+    from spreadgym.threads import set_threads, shares
 
-    per_worker = max(1, (args.threads or thread_count()) // args.workers)  # the two levels never multiply
+    per_worker = min(shares(args.workers, args.threads))  # the same for every pool worker
     set_threads(per_worker)
     policies = _load_policies(args.model or [], args.env)
     from spreadgym.agents.policies import DEFAULT_ENV

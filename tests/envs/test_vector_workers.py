@@ -232,7 +232,7 @@ def test_blocks_are_contiguous_and_the_thread_shares_add_up(monkeypatch):
     assert shards.blocks(64, 3) == [(0, 22), (22, 43), (43, 64)]
     for count, workers in [(2, 2), (16, 3), (16, 16), (7, 4)]:
         monkeypatch.setenv(threads.ENV_VAR, str(count))
-        shares = shards.thread_shares(workers)
+        shares = threads.shares(workers)
         assert sum(shares) == count and max(shares) - min(shares) <= 1 and min(shares) >= 1
 
 
