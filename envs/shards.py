@@ -34,10 +34,9 @@ _CLOSE_WAIT_S = 10.0  # a worker still running this long after "close" is termin
 
 
 def blocks(num_envs: int, workers: int) -> list[tuple[int, int]]:
-    """[first, stop) sub-env indices of each worker: contiguous, sizes differing by one at most."""
-    sizes = [num_envs // workers + (w < num_envs % workers) for w in range(workers)]
-    stops = np.cumsum(sizes).tolist()
-    return [(stop - size, stop) for stop, size in zip(stops, sizes)]
+    """[first, stop) sub-env indices of each worker: contiguous, sizes differing by one at
+    most (workers <= num_envs, so none is empty)."""
+    return [(int(part[0]), int(part[-1]) + 1) for part in np.array_split(np.arange(num_envs), workers)]
 
 
 class Shards:
