@@ -22,8 +22,12 @@ SMALL = {"granules": 32}
 NAMES = ["SpinnerDesign-v0", "SpreaderTuning-v0"]
 
 
-def run_python(code: str, cwd=None, timeout=240) -> subprocess.CompletedProcess:
+def run_python(code: str, cwd=None, timeout=240, log_dir=None) -> subprocess.CompletedProcess:
+    """`python *code`; `log_dir`: where SB3 writes the logs of a trainer that sets none (rl-zoo
+    without --tensorboard-log), instead of a new folder in the user's temp folder per run."""
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    if log_dir is not None:
+        env["SB3_LOGDIR"] = str(log_dir)
     return subprocess.run([sys.executable, *code], capture_output=True, text=True, timeout=timeout, cwd=cwd, env=env)
 
 
@@ -226,7 +230,7 @@ def test_zoo_reads_the_shipped_file_and_trains(algo, tmp_path):
             "--env-kwargs", "granules:32", "--vec-env", "subproc"]
     # PPO: one rollout (2 envs x 32 steps); TQC: a few gradient steps after 4 random ones
     args += ["-n", "64"] if algo == "ppo" else ["-n", "8", "--hyperparams", "learning_starts:4"]
-    out = run_python(args, timeout=300)
+    out = run_python(args, timeout=300, log_dir=tmp_path / "sb3")
     assert out.returncode == 0, out.stderr[-2000:]
     assert (tmp_path / algo / "SpinnerDesign-v0_1" / "SpinnerDesign-v0.zip").is_file()
 
@@ -240,7 +244,7 @@ def test_zoo_trains_a_v1_task_in_subprocesses_and_evaluate_scores_its_model(tmp_
     args = ["-m", "spreadgym.envs.zoo", "train", "--algo", "ppo", "--env", env_id, "-conf",
             str(hyperparams_path("ppo")), "--num-threads", "1", "-f", str(tmp_path), "--env-kwargs", "granules:32",
             "--vec-env", "subproc", "-n", "64"]
-    out = run_python(args, timeout=300)
+    out = run_python(args, timeout=300, log_dir=tmp_path / "sb3")
     assert out.returncode == 0, out.stderr[-2000:]
     models = [p for p in (tmp_path / "ppo").glob("*/*.zip") if p.name != "best_model.zip"]
     assert len(models) == 1
