@@ -47,6 +47,55 @@ def test_the_cuda_kernel_gives_the_cpu_results_in_one_launch_per_batch(cuda_simu
     assert found["launches"] == [24 * 4]  # every scene's granules (twin-field's second disc is its first mirrored)
 
 
+QUEUED = """
+import json, numpy as np
+from spreadgym.config.materials import load_library
+from spreadgym.config.scene import load_scene
+from spreadgym.physics.compiled import cuda_spinner, granule_run
+from spreadgym.physics.compiled.layout import DISC_RADIUS
+from spreadgym.physics.compiled.model import START_BINS, kernel_arrays, kernel_inputs, longest_first
+from spreadgym.spread.pipeline import plan_scene
+
+library = load_library()
+runs = [run for seed, name in enumerate(["paper", "field"])
+        for run in plan_scene(load_scene(name, {"sim.granules": 20, "sim.seed": seed}), "auto", library).spinner_runs()]
+arrays, counts = kernel_arrays([kernel_inputs(*run) for run in runs])
+n = int(counts.sum())
+cpu_out, cpu_outcome = np.zeros((n, granule_run.OUT_SIZE)), np.zeros(n, dtype=np.int8)
+granule_run.run_all(*arrays, cpu_out, cpu_outcome, np.empty((0, 1, 3)))
+order = longest_first(arrays[0], arrays[2], arrays[5])
+cuda_spinner.THREADS_PER_BLOCK = 4  # 2 blocks of 4 threads: each thread runs about 5 granules
+taken = []
+follow = cuda_spinner.granule_run.follow
+def counted(*args):
+    taken.append(args[0])
+    return follow(*args)
+cuda_spinner.granule_run.follow = counted
+bins = np.minimum((np.hypot(arrays[0][:, 0], arrays[0][:, 1]) / arrays[5][arrays[2], DISC_RADIUS] * START_BINS)
+                  .astype(int), START_BINS - 1)
+found = {"granules": n, "bins": len(set(bins.tolist())),
+         "order_is_the_stable_sort_of_the_bins": bool(np.array_equal(order, np.argsort(bins, kind="stable")))}
+for name, kwargs in (("longest first", {}), ("launch order", {"order": np.arange(n)})):
+    taken.clear()
+    out, outcome = np.full((n, granule_run.OUT_SIZE), np.nan), np.full(n, -1, dtype=np.int8)
+    cuda_spinner.run_all(*arrays, out, outcome, threads=7, **kwargs)
+    found[name] = {"out_equal": bool(np.array_equal(out, cpu_out)), "outcome_equal": bool(np.array_equal(outcome, cpu_outcome)),
+                   "runs": len(taken)}
+print(json.dumps(found))
+"""
+
+
+def test_the_queue_gives_every_granule_its_cpu_bits_in_any_order(cuda_simulator):
+    """Fewer threads than granules (8 threads, 40 granules): each thread takes granules
+    from the queue until none is left, every granule runs once, and the departures and
+    outcomes are the CPU kernel's bits whether the queue hands them out longest first
+    (the granules sorted by start radius bin, launch order within a bin) or in launch order."""
+    found = cuda_simulator(QUEUED)
+    assert found["granules"] == 40 and found["bins"] > 3 and found["order_is_the_stable_sort_of_the_bins"]
+    for name in ("longest first", "launch order"):
+        assert found[name] == {"out_equal": True, "outcome_equal": True, "runs": 40}, name
+
+
 @pytest.mark.skipif(device.cuda_available(), reason="a CUDA GPU is present: the no-GPU errors do not apply")
 def test_cuda_without_a_gpu_is_a_one_line_error(capsys, monkeypatch):
     monkeypatch.delenv(device.ENV_VAR, raising=False)

@@ -1,22 +1,36 @@
-"""The compiled spinner on a CUDA GPU: one thread per granule, one launch per batch.
+"""The compiled spinner on a CUDA GPU: one launch per batch, threads taking granules from a queue.
 
 The kernel calls the CPU kernel's own scalar code, `granule_run.follow` and everything
 it calls: numba.cuda compiles a CPU-jitted function that a GPU kernel calls for the GPU
 from its Python source, so the physics is defined once and a change to it reaches both
-devices. The only GPU-specific part is here: the thread index over the flat
-(design x granule) index of `granule_run.run_all` and the granule's scratch array in the
-thread's local memory. Results equal the CPU's up to floating-point contraction (the GPU
-compiler fuses multiply-adds); under numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1)
-the kernel runs the CPU code itself and the results are the CPU's bits.
+devices. The GPU-specific part is here: how granules are handed to threads, and each
+thread's scratch array in its local memory. Results equal the CPU's up to floating-point
+contraction (the GPU compiler fuses multiply-adds); under numba's CUDA simulator
+(NUMBA_ENABLE_CUDASIM=1) the kernel runs the CPU code itself and the results are the
+CPU's bits.
+
+**The schedule.** A granule's run takes from 10 to over 1 000 passes of its event
+loop (paper designs: median 32, 99th percentile 96), and the 32 threads of a warp advance
+together, so a warp of one granule per thread lasts as long as its slowest granule:
+counted on 64 paper designs, the warps' longest runs add up to 2.5 times their mean
+runs. Here each thread instead takes the next granule from a queue (an atomic counter)
+as it finishes one, over a grid no larger than the GPU keeps resident, and the queue hands
+out the granules that start nearest the axis first (they run longest: the start radius
+correlates -0.64 with the passes), so the last granules taken are short ones. A schedule
+model fed with those counts (studies/gpu_schedule.py) forecasts the kernel 2.2-3.2 times
+faster at 1 024 designs, not yet measured on a GPU (docs/performance.md, the CUDA
+backend); each granule is computed alone, so the schedule never changes a result.
 
 Imported only when the device is "cuda" (spreadgym.device); numba's CUDA target then
 compiles the kernel at the first launch and caches it next to this file. On an H200
-(numba-cuda 0.30.4, sm_90) it compiled in 39 s and matched the CPU on 155 648 granules of
-72 designs: the same outcomes, departures within 6e-12 m/s, the same tray masses to the
-bit (docs/performance.md, the CUDA backend).
+(numba-cuda 0.30.4, sm_90) the one-granule-per-thread kernel compiled in 39 s and matched
+the CPU on 155 648 granules of 72 designs: the same outcomes, departures within
+6e-12 m/s, the same tray masses to the bit (docs/performance.md, the CUDA backend).
 """
 
 from __future__ import annotations
+
+from typing import Optional
 
 import numpy as np
 
@@ -25,11 +39,17 @@ if not hasattr(np, "row_stack"):  # numba-cuda 0.30 registers np.row_stack (an a
 
 from numba import config, cuda, float64  # noqa: E402 (after the alias above)
 
-from spreadgym.physics.compiled import face_motion, granule_run
+from spreadgym.physics.compiled import face_motion, granule_run  # noqa: E402
+from spreadgym.physics.compiled.model import longest_first  # noqa: E402
 
 SCRATCH = (2, face_motion.EVENTS)  # a module constant: numba.cuda sizes local arrays from constants only
 THREADS_PER_BLOCK = 64
-"""Granules per block: 32 to 256 ran within 10 % of each other on an H200 (docs/performance.md)."""
+"""Threads per block: 32 to 256 ran within 10 % of each other on an H200 (docs/performance.md)."""
+RESIDENT_THREADS_PER_SM = 2048
+"""The most threads a multiprocessor holds at once (every GPU since Volta): the grid is
+at most this many per multiprocessor; blocks beyond what fits wait and then find the
+queue shorter, so a smaller real occupancy costs nothing but idle blocks."""
+SIMULATED_THREADS = 128  # the grid under numba's CUDA simulator (it has no device to ask)
 
 
 if config.ENABLE_CUDASIM:
@@ -44,24 +64,42 @@ else:
 
 
 @cuda.jit(cache=True)  # the GPU compile takes minutes (200 s for sm_90 on the two-core machine): once per install
-def _run_all(start, radius, design, z0, vz0, P, V, vane_count, out, outcome, no_track):
-    i = cuda.grid(1)
-    if i < start.shape[0]:
+def _run_queue(order, taken, start, radius, design, z0, vz0, P, V, vane_count, out, outcome, no_track):
+    """Each thread runs granules order[k], k taken from the counter taken[0], until none is left."""
+    work = cuda.local.array(SCRATCH, float64)
+    k = cuda.atomic.add(taken, 0, 1)
+    while k < order.shape[0]:
+        i = order[k]
         d = design[i]
-        work = cuda.local.array(SCRATCH, float64)
         outcome[i] = granule_run.follow(start[i, 0], start[i, 1], radius[i], z0[d], vz0[d], _array(P[d]),
                                         _array(V[d, :vane_count[d]]), _array(out[i]), _array(no_track), work)
+        k = cuda.atomic.add(taken, 0, 1)
 
 
-def run_all(start, radius, design, z0, vz0, P, V, vane_count, out, outcome) -> None:
-    """`granule_run.run_all` on the GPU (no tracks): inputs copied over, `out` and
-    `outcome` filled in place."""
+def grid_threads() -> int:
+    """The most threads the GPU keeps resident (multiprocessors x RESIDENT_THREADS_PER_SM);
+    SIMULATED_THREADS under the simulator."""
+    if config.ENABLE_CUDASIM:
+        return SIMULATED_THREADS
+    return int(cuda.get_current_device().MULTIPROCESSOR_COUNT) * RESIDENT_THREADS_PER_SM
+
+
+def run_all(start, radius, design, z0, vz0, P, V, vane_count, out, outcome, threads: Optional[int] = None,
+            order: Optional[np.ndarray] = None) -> None:
+    """`granule_run.run_all` on the GPU (no tracks): `out` and `outcome` filled in place.
+    `threads` (default `grid_threads()`, rounded up to whole blocks) take the granules in
+    `order` (default `longest_first`); neither changes a result (docs/performance.md
+    measures them)."""
     n = start.shape[0]
     if n == 0:
         return
-    inputs = [cuda.to_device(np.ascontiguousarray(a)) for a in (start, radius, design, z0, vz0, P, V, vane_count)]
-    device_out, device_outcome = cuda.to_device(out), cuda.to_device(outcome)
-    blocks = (n + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
-    _run_all[blocks, THREADS_PER_BLOCK](*inputs, device_out, device_outcome, cuda.to_device(np.empty((0, 3))))
+    if order is None:
+        order = longest_first(start, design, P)
+    threads = min(n, grid_threads() if threads is None else threads)
+    inputs = [cuda.to_device(np.ascontiguousarray(a))
+              for a in (order, np.zeros(1, dtype=np.int64), start, radius, design, z0, vz0, P, V, vane_count)]
+    device_out, device_outcome = cuda.device_array(out.shape, out.dtype), cuda.device_array(outcome.shape, outcome.dtype)
+    blocks = (threads + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
+    _run_queue[blocks, THREADS_PER_BLOCK](*inputs, device_out, device_outcome, cuda.to_device(np.empty((0, 3))))
     device_out.copy_to_host(out)
     device_outcome.copy_to_host(outcome)
