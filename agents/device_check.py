@@ -40,7 +40,10 @@ cut short still returns what it did):
    - the spinner stage alone (`model.simulate_compiled_batch`, host<->device copies
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
-     call's three steps timed once apart, and the GPU's launch block size (32-256);
+     call's three steps timed once apart;
+   - the spinner kernel alone under three schedules (the shipped queue of granules handed
+     out longest first, the queue in launch order, one granule per thread), at 1024 and
+     4096 designs, their outputs compared to the bit;
    - the whole `run_batch` and the vector env with device "cuda" and "cpu" (16 threads).
 
 Every section is guarded (its error is one printed line), capped in time, and the whole
@@ -599,8 +602,8 @@ def gpu_main(args) -> None:
         batch = Table(out / "gpu_batch.csv")
         with section("run_batch and the vector env, cuda against cpu", args.batch_cap_s) as until:
             whole_batches(batch, library, until, granules, toy, cores)
-        with section("GPU launch block size (spinner stage)", 40) as until:
-            block_sizes(spinner, library, until, granules, toy, cores)
+        with section("GPU schedules of the spinner kernel", 60) as until:
+            schedules(spinner, library, until, granules, toy, cores)
     finally:
         threads.set_threads(None)
         write_json(out / "gpu.json", report)
@@ -735,38 +738,50 @@ def threads_per_block() -> int:
     return cuda_spinner.THREADS_PER_BLOCK
 
 
-def block_sizes(table: Table, library, until: float, granules: Optional[int], toy: bool, cores: int) -> None:
-    """The spinner stage on the GPU at 1024 designs with other launch block sizes (a launch setting: no recompile)."""
+def schedules(table: Table, library, until: float, granules: Optional[int], toy: bool, cores: int) -> None:
+    """The spinner kernel alone (inputs packed beforehand; the queue's order, the copies and
+    the launch timed) under three schedules, at 1024 and 4096 paper designs: the shipped
+    queue handing out granules longest first, the queue in launch order, and one granule
+    per thread in launch order (the schedule before the queue). The outputs of the three
+    must be equal to the bit (each granule's arithmetic is the same whichever thread runs it)."""
     from numba import cuda
 
-    from spreadgym import device, threads
-    from spreadgym.physics.compiled import cuda_spinner, model
+    from spreadgym.physics.compiled import cuda_spinner, granule_run, model
 
-    size = 4 if toy else 1024
-    part = spinner_runs_of(size, library, granules)
-    n_granules = sum(r[1].radius_m.shape[0] for r in part)
-    shipped = cuda_spinner.THREADS_PER_BLOCK
-    threads.set_threads(cores)
-    def measure(tpb: int) -> None:
-        cuda_spinner.THREADS_PER_BLOCK = tpb
-        with device.using("cuda"):
-            times, _ = timed(lambda: model.run_kernels([model.kernel_inputs(*r) for r in part]), 3,
-                             until, sync=cuda.synchronize)
-        median, low, high = spread_of(times)
-        table.add({"device": "cuda", "threads": cores, "threads_per_block": tpb, "designs": size,
-                   "granules": n_granules, "repeats": len(times), "median_s": median, "low_s": low, "high_s": high,
-                   "granule_runs_per_s": n_granules / median, "designs_per_s": size / median,
-                   "note": "inputs + kernel + copies (no machine-frame turn)"})
-        say(f"block size {tpb:3d}: {median * 1e3:8.1f} ms at {size} designs")
+    sizes = (4,) if toy else (1024, 4096)
+    runs = spinner_runs_of(max(sizes), library, granules)
+    for size in sizes:
+        if time.time() > until - 5.0:
+            say(f"out of time before {size} designs")
+            break
+        arrays, counts = model.kernel_arrays([model.kernel_inputs(*run) for run in runs[:size]])
+        n = int(counts.sum())
+        started = time.perf_counter()
+        model.longest_first(arrays[0], arrays[2], arrays[5])
+        order_s = time.perf_counter() - started
+        launch_order = np.arange(n)
+        found = {}
+        for name, kwargs in (("queue, longest first (shipped)", {}), ("queue, launch order", {"order": launch_order}),
+                             ("one granule per thread", {"order": launch_order, "threads": n})):
+            out, outcome = np.zeros((n, granule_run.OUT_SIZE)), np.zeros(n, dtype=np.int8)
 
-    try:
-        for tpb in (32, 64, 128, 256):
-            if time.time() > until:
-                say("out of time")
-                break
-            guarded(f"block size {tpb}", measure, tpb)
-    finally:
-        cuda_spinner.THREADS_PER_BLOCK = shipped
+            def launch() -> None:
+                cuda_spinner.run_all(*arrays, out, outcome, **kwargs)
+
+            if time.time() > until - 2.0:
+                say(f"out of time before {name} at {size} designs")
+                continue
+            times, _ = timed(launch, 3, until, sync=cuda.synchronize)
+            found[name] = (out.copy(), outcome.copy())
+            median, low, high = spread_of(times)
+            same = all(np.array_equal(out, o) and np.array_equal(outcome, c) for o, c in found.values())
+            table.add({"device": "cuda", "threads": cores, "threads_per_block": cuda_spinner.THREADS_PER_BLOCK,
+                       "designs": size, "granules": n, "repeats": len(times), "median_s": median, "low_s": low,
+                       "high_s": high, "granule_runs_per_s": n / median, "designs_per_s": size / median,
+                       "note": f"kernel alone, {name}; queue order {order_s * 1e3:.1f} ms; "
+                               f"outputs equal to the first schedule's: {same}"})
+            say(f"schedule {name:32s} {size:5d} designs: {median * 1e3:8.1f} ms ({size / median:8.1f} designs/s), "
+                f"equal bits: {same}")
 
 
 def whole_batches(table: Table, library, until: float, granules: Optional[int], toy: bool, cores: int) -> None:

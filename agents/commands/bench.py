@@ -17,7 +17,7 @@ from spreadgym.report import format_table
 SECTIONS = ("spinner", "methods", "flight", "env", "references", "fidelity", "cv-noise", "targets", "speed-accuracy",
             "stability", "magnus", "chart-scale", "vector-env", "startup", "precision", "honesty", "env-noise",
             "chart-quality", "fit", "batch", "validation", "server", "web",
-            "advise", "rl-benchmark", "plates")
+            "advise", "rl-benchmark", "plates", "gpu-schedule")
 """Every section, in the order `make bench` runs them (`section_runners` gives each its work)."""
 
 
@@ -48,6 +48,7 @@ def section_runners(args: argparse.Namespace, say) -> dict:
         estimate_bench,
         fidelity,
         fit_bench,
+        gpu_schedule,
         magnus,
         plates,
         references,
@@ -87,6 +88,7 @@ def section_runners(args: argparse.Namespace, say) -> dict:
         "advise": lambda: advise_bench.advise_bench_rows(args.out / "advise", tests=20, progress=say),
         "rl-benchmark": lambda: rl_benchmark_rows(args.out, say),
         "plates": lambda: plate_rows(plates, args.out, say),
+        "gpu-schedule": lambda: gpu_schedule.schedule_rows(),
     }
 
 
