@@ -356,8 +356,15 @@ def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, e
         from spreadgym.agents.benchmark import plot_profiles
 
         written.append(plot_profiles(aggregated["matrices"], out / "profiles.png",
-                                     {m: titles.get(m, m) for m in order}))
+                                     {m: legend_label(titles.get(m, m)) for m in order}))
     return written
+
+
+def legend_label(title: str, most: int = 32) -> str:
+    """A method's title short enough for a legend: a policy file's name without its folders
+    ("runs/a/policy.py:act" -> "policy.py:act"), cut to `most` characters."""
+    short = title.rsplit("/", 1)[-1] if "/" in title else title
+    return short if len(short) <= most else short[:most - 1] + "\u2026"
 
 
 def cv_bars(path: Path, rows, order, titles) -> Path:
@@ -378,13 +385,12 @@ def cv_bars(path: Path, rows, order, titles) -> Path:
             key = (r.context["fertilizer"], r.context["target_swath_m"])
             by_job.setdefault(key, []).append(100.0 if r.cv_percent is None else r.cv_percent)
         values = [float(np.mean(by_job.get(j, [np.nan]))) for j in jobs]
-        ax.bar(x + (i - (len(order) - 1) / 2) * width, values, width, label=titles.get(m, m))
+        ax.bar(x + (i - (len(order) - 1) / 2) * width, values, width, label=legend_label(titles.get(m, m)))
     ax.set_xticks(x, [f"{f.split('-')[0]}\n{s:g} m" for f, s in jobs], fontsize=8)
     ax.set_ylabel("CV at target swath (%)")
     ax.axhline(15.0, color="#c0392b", ls="--", lw=1, label="15 % threshold")
-    ax.legend(fontsize=8, ncol=min(len(order) + 1, 7), loc="lower center", bbox_to_anchor=(0.5, 1.01),
-              frameon=False)
-    ax.set_title("CV at the target swath per job (lower is better)", pad=28)
+    fig.legend(fontsize=8, loc="outside right upper", frameon=False)  # beside the axes: any count of methods fits
+    ax.set_title("CV at the target swath per job (lower is better)")
     ax.grid(True, axis="y", color="#e5e5e5")
     ax.set_axisbelow(True)
     fig.savefig(path)

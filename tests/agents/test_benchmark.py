@@ -163,6 +163,7 @@ def test_evaluate_refuses_what_it_cannot_run(plain_model, capsys, tmp_path):
         assert code == 2 and needle in err and "Traceback" not in err, err
 
 
+@pytest.mark.filterwarnings("error::UserWarning")  # a legend of long labels once collapsed the chart's axes
 def test_compare_groups_labelled_runs_and_normalises_with_references(plain_model, callable_file, capsys,
                                                                      tmp_path, monkeypatch):
     """Two runs under one label, a callable and two baselines with two seeds each, on two
@@ -188,6 +189,15 @@ def test_compare_groups_labelled_runs_and_normalises_with_references(plain_model
     assert sorted({r["episode"] for r in centre}) == [0, 1]  # run k scores on episode k (one per run)
     assert "normalised IQM" in (tmp_path / "compare.md").read_text()
     assert (tmp_path / "profiles.png").is_file()
+
+
+def test_legend_labels_drop_a_policy_files_folders_and_stay_short():
+    from spreadgym.agents.commands.compare import legend_label
+
+    assert legend_label("/tmp/runs/a/rule.py:policy") == "rule.py:policy"
+    assert legend_label("centre action") == "centre action"
+    long = legend_label("x" * 50)
+    assert len(long) == 32 and long.endswith("\u2026")
 
 
 def test_compare_without_references_says_so(capsys, tmp_path, monkeypatch):
