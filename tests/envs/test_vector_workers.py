@@ -99,6 +99,11 @@ def test_a_bad_worker_count_is_a_one_line_error_before_any_process_starts(bad):
     assert not multiprocessing.active_children()
 
 
+def test_a_single_env_given_workers_says_where_they_belong():
+    with pytest.raises(ConfigError, match=r"^workers: unknown key; .*gym\.make_vec\(id, num_envs=N, workers=P\)\)$"):
+        gym.make(ID, workers=2, **SMALL)
+
+
 def test_workers_beyond_the_threads_are_refused(monkeypatch):
     monkeypatch.setenv(threads.ENV_VAR, "1")
     with pytest.raises(ConfigError, match=r"workers: 2 processes for the 1 threads .* allowed: 1 to 1"):
