@@ -8,15 +8,19 @@ one pass per unit of time, and gives the kernel's time in those units under thre
 schedules, for several counts of threads the GPU keeps resident:
 
 - one granule per thread in launch order: blocks of `cuda_spinner.THREADS_PER_BLOCK`
-  threads (importing it loads numba's CUDA target, which needs no GPU), a block holding its place until its slowest granule ends, the next block
-  taking the place (how a GPU hands out blocks);
+  threads (importing it loads numba's CUDA target, which needs no GPU), a block holding
+  its place until its slowest granule ends, the next block taking the place (how a GPU
+  hands out blocks);
 - a queue in launch order: every resident thread takes the next granule as it ends one;
 - a queue longest first: the same, in `model.longest_first` order (the shipped one).
 
 It is a model (no memory traffic, no divergence inside a pass, a uniform pass cost), so
 its figures are a forecast that a GPU measurement settles (agents/device_check.py,
 section "GPU schedules"); the bound column is what no schedule can beat (the work over
-the threads, or the longest granule).
+the threads, or the longest granule). A fixed pass time ignores that a nearly empty GPU
+runs a pass faster than a full one, so the model overstates small batches' times; each
+row also gives the warps' longest runs over their mean runs, the gain if the GPU is bound
+by the warp instructions it issues.
 """
 
 from __future__ import annotations
@@ -25,10 +29,10 @@ import heapq
 
 import numpy as np
 
-RESIDENT = (8_192, 16_384, 32_768, 65_536, 131_072)
-"""Threads a GPU keeps resident: an H200 (132 SMs) at 62 to ~1 000 threads per SM. On the H200
-measured, the one-granule-per-thread kernel took 50.6 times as long for 64 times the designs
-(64 to 4 096), which this model gives between 8 192 and 16 384 resident threads (58.5 and 38.6)."""
+RESIDENT = (16_384, 42_240, 65_536, 131_072)
+"""Threads a GPU keeps resident. 42 240 is an H200 or H100 SXM (132 SMs) at this kernel's
+registers: ptxas 12.9 for sm_90 gives the queue kernel 188 registers a thread (the
+one-granule-per-thread kernel 194), no spills, so 10 warps, 320 threads, per SM."""
 DESIGNS = (64, 256, 1024)
 
 

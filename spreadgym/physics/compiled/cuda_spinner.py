@@ -17,8 +17,8 @@ runs. Here each thread instead takes the next granule from a queue (an atomic co
 as it finishes one, over a grid no larger than the GPU keeps resident, and the queue hands
 out the granules that start nearest the axis first (they run longest: the start radius
 correlates -0.64 with the passes), so the last granules taken are short ones. A schedule
-model fed with those counts (studies/gpu_schedule.py) forecasts the kernel 2.2-3.2 times
-faster at 1 024 designs, not yet measured on a GPU (docs/performance.md, the CUDA
+model fed with those counts (studies/gpu_schedule.py) forecasts the kernel about 2.5-3
+times faster on large batches, not yet measured on a GPU (docs/performance.md, the CUDA
 backend); each granule is computed alone, so the schedule never changes a result.
 
 Imported only when the device is "cuda" (spreadgym.device); numba's CUDA target then
@@ -46,9 +46,10 @@ SCRATCH = (2, face_motion.EVENTS)  # a module constant: numba.cuda sizes local a
 THREADS_PER_BLOCK = 64
 """Threads per block: 32 to 256 ran within 10 % of each other on an H200 (docs/performance.md)."""
 RESIDENT_THREADS_PER_SM = 2048
-"""The most threads a multiprocessor holds at once (every GPU since Volta): the grid is
-at most this many per multiprocessor; blocks beyond what fits wait and then find the
-queue shorter, so a smaller real occupancy costs nothing but idle blocks."""
+"""At least as many threads as a multiprocessor holds at once (2048 on Volta, A100 and
+H100/H200, fewer on others; this kernel's 188 registers a thread allow 320 on sm_90): the
+grid is this many per multiprocessor; blocks beyond what fits wait and then find the
+queue empty, so a smaller real occupancy costs nothing but idle blocks."""
 SIMULATED_THREADS = 128  # the grid under numba's CUDA simulator (it has no device to ask)
 
 
