@@ -69,6 +69,7 @@ import tempfile
 import time
 import traceback
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -764,10 +765,7 @@ def schedules(table: Table, library, until: float, granules: Optional[int], toy:
         for name, kwargs in (("queue, longest first (shipped)", {}), ("queue, launch order", {"order": launch_order}),
                              ("one granule per thread", {"order": launch_order, "threads": n})):
             out, outcome = np.zeros((n, granule_run.OUT_SIZE)), np.zeros(n, dtype=np.int8)
-
-            def launch() -> None:
-                cuda_spinner.run_all(*arrays, out, outcome, **kwargs)
-
+            launch = partial(cuda_spinner.run_all, *arrays, out, outcome, **kwargs)
             if time.time() > until - 2.0:
                 say(f"out of time before {name} at {size} designs")
                 continue

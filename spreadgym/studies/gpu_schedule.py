@@ -84,8 +84,9 @@ def schedule_rows() -> list[dict]:
 
     passes, start, design, params = pass_counts()
     warps = passes[: passes.size // 32 * 32].reshape(-1, 32)
-    spread = {"passes_min": float(passes.min()), "passes_median": float(np.median(passes)), "passes_p99": float(np.percentile(passes, 99)),
-              "passes_max": float(passes.max()), "warp_longest_over_mean": warps.max(1).sum() / warps.mean(1).sum(),
+    spread = {"passes_min": float(passes.min()), "passes_median": float(np.median(passes)),
+              "passes_p99": float(np.percentile(passes, 99)), "passes_max": float(passes.max()),
+              "warp_longest_over_mean": warps.max(1).sum() / warps.mean(1).sum(),
               "corr_passes_start_radius": float(np.corrcoef(passes, np.hypot(start[:, 0], start[:, 1]))[0, 1])}
     rows = []
     for designs in DESIGNS:

@@ -79,8 +79,8 @@ for name, kwargs in (("longest first", {}), ("launch order", {"order": np.arange
     taken.clear()
     out, outcome = np.full((n, granule_run.OUT_SIZE), np.nan), np.full(n, -1, dtype=np.int8)
     cuda_spinner.run_all(*arrays, out, outcome, threads=7, **kwargs)
-    found[name] = {"out_equal": bool(np.array_equal(out, cpu_out)), "outcome_equal": bool(np.array_equal(outcome, cpu_outcome)),
-                   "runs": len(taken)}
+    found[name] = {"out_equal": bool(np.array_equal(out, cpu_out)),
+                   "outcome_equal": bool(np.array_equal(outcome, cpu_outcome)), "runs": len(taken)}
 print(json.dumps(found))
 """
 

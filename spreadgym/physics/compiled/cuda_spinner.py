@@ -99,7 +99,8 @@ def run_all(start, radius, design, z0, vz0, P, V, vane_count, out, outcome, thre
     threads = min(n, grid_threads() if threads is None else threads)
     inputs = [cuda.to_device(np.ascontiguousarray(a))
               for a in (order, np.zeros(1, dtype=np.int64), start, radius, design, z0, vz0, P, V, vane_count)]
-    device_out, device_outcome = cuda.device_array(out.shape, out.dtype), cuda.device_array(outcome.shape, outcome.dtype)
+    device_out = cuda.device_array(out.shape, out.dtype)  # every granule writes all its columns: nothing to copy in
+    device_outcome = cuda.device_array(outcome.shape, outcome.dtype)
     blocks = (threads + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
     _run_queue[blocks, THREADS_PER_BLOCK](*inputs, device_out, device_outcome, cuda.to_device(np.empty((0, 3))))
     device_out.copy_to_host(out)
