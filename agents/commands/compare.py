@@ -356,15 +356,24 @@ def write_outputs(out: Path, summaries, rows, order, titles, args, env_kwargs, e
         from spreadgym.agents.benchmark import plot_profiles
 
         written.append(plot_profiles(aggregated["matrices"], out / "profiles.png",
-                                     {m: legend_label(titles.get(m, m)) for m in order}))
+                                     legend_labels({m: titles.get(m, m) for m in order})))
     return written
 
 
-def legend_label(title: str, most: int = 32) -> str:
-    """A method's title short enough for a legend: a policy file's name without its folders
-    ("runs/a/policy.py:act" -> "policy.py:act"), cut to `most` characters."""
-    short = title.rsplit("/", 1)[-1] if "/" in title else title
-    return short if len(short) <= most else short[:most - 1] + "\u2026"
+def legend_labels(titles: dict[str, str], most: int = 32) -> dict[str, str]:
+    """Each method's title short enough for a legend: a policy file's name without its
+    folders ("runs/a/policy.py:act" -> "policy.py:act"), at most `most` characters; titles
+    that would then read alike keep their ends instead ("...a/policy.py:act"), or in full."""
+    def cut(text: str) -> str:
+        return text if len(text) <= most else text[:most - 1] + "\u2026"
+
+    names = {m: cut(t.rsplit("/", 1)[-1]) for m, t in titles.items()}
+    taken = list(names.values())
+    short = {m: names[m] if taken.count(names[m]) == 1 else t if len(t) <= most else "\u2026" + t[-(most - 1):]
+             for m, t in titles.items()}
+    if len(set(short.values())) < len(short):
+        return dict(titles)
+    return short
 
 
 def cv_bars(path: Path, rows, order, titles) -> Path:
@@ -374,6 +383,7 @@ def cv_bars(path: Path, rows, order, titles) -> Path:
     from matplotlib.figure import Figure
 
     jobs = sorted({(r.context["fertilizer"], r.context["target_swath_m"]) for m in order for r in rows[m]})
+    labels = legend_labels({m: titles.get(m, m) for m in order})
     fig = Figure(figsize=(max(7.0, 0.75 * len(jobs) + 2), 4.2), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
@@ -385,7 +395,7 @@ def cv_bars(path: Path, rows, order, titles) -> Path:
             key = (r.context["fertilizer"], r.context["target_swath_m"])
             by_job.setdefault(key, []).append(100.0 if r.cv_percent is None else r.cv_percent)
         values = [float(np.mean(by_job.get(j, [np.nan]))) for j in jobs]
-        ax.bar(x + (i - (len(order) - 1) / 2) * width, values, width, label=legend_label(titles.get(m, m)))
+        ax.bar(x + (i - (len(order) - 1) / 2) * width, values, width, label=labels[m])
     ax.set_xticks(x, [f"{f.split('-')[0]}\n{s:g} m" for f, s in jobs], fontsize=8)
     ax.set_ylabel("CV at target swath (%)")
     ax.axhline(15.0, color="#c0392b", ls="--", lw=1, label="15 % threshold")

@@ -191,13 +191,33 @@ def test_compare_groups_labelled_runs_and_normalises_with_references(plain_model
     assert (tmp_path / "profiles.png").is_file()
 
 
-def test_legend_labels_drop_a_policy_files_folders_and_stay_short():
-    from spreadgym.agents.commands.compare import legend_label
+def test_legend_labels_drop_a_policy_files_folders_stay_short_and_stay_apart():
+    from spreadgym.agents.commands.compare import legend_labels
 
-    assert legend_label("/tmp/runs/a/rule.py:policy") == "rule.py:policy"
-    assert legend_label("centre action") == "centre action"
-    long = legend_label("x" * 50)
+    assert legend_labels({"a": "/tmp/runs/a/rule.py:policy", "b": "centre action"}) == {
+        "a": "rule.py:policy", "b": "centre action"}
+    long = legend_labels({"a": "x" * 50})["a"]
     assert len(long) == 32 and long.endswith("\u2026")
+    # two policy files of one name: their ends tell them apart
+    apart = legend_labels({"p": "/tmp/runs/ppo/policy.py:act", "s": "/tmp/runs/sac/policy.py:act"})
+    assert apart == {"p": "/tmp/runs/ppo/policy.py:act", "s": "/tmp/runs/sac/policy.py:act"}
+    deep = {m: "/a" * 30 + f"/{m}/policy.py:act" for m in ("ppo", "sac")}
+    assert legend_labels(deep) == {m: "\u2026" + t[-31:] for m, t in deep.items()}  # "...a/a/ppo/policy.py:act"
+
+
+@pytest.mark.filterwarnings("error::UserWarning")
+def test_the_cv_chart_keeps_its_axes_with_many_long_labels(tmp_path):
+    """Seven methods named by 60-character paths: the legend goes beside the axes, which
+    keep their size (constrained layout once collapsed them, with a warning)."""
+    from types import SimpleNamespace
+
+    from spreadgym.agents.commands.compare import cv_bars
+
+    order = [f"m{i}" for i in range(7)]
+    titles = {m: "/".join(["folder"] * 8) + f"/policy_{m}.py:act" for m in order}
+    rows = {m: [SimpleNamespace(context={"fertilizer": "pellet", "target_swath_m": w}, cv_percent=10.0 + i)
+                for w in (12.0, 24.0)] for i, m in enumerate(order)}
+    assert cv_bars(tmp_path / "cv.png", rows, order, titles).is_file()
 
 
 def test_compare_without_references_says_so(capsys, tmp_path, monkeypatch):
