@@ -329,7 +329,7 @@ def _sections(schema: type[BaseModel]) -> set[str]:
 MAX_EXTENDS = 8  # depth of `extends` chains
 VECTOR_ONLY = {"workers": " (`workers` is an option of the SpinnerDesign vector env: "
                           "gym.make_vec(id, num_envs=N, workers=P))"}
-"""Keys a single env does not take because they belong to the vector env, with where they go."""
+"""Keys a SpinnerDesign env does not take because they belong to its vector env, with where they go."""
 
 
 def read_env_yaml(source: str) -> dict:
@@ -379,7 +379,7 @@ def load_env_config(name: str, overrides: Optional[Mapping[str, Any]] = None) ->
         if not isinstance(key, str):
             raise ConfigError(str(key), "keys must be strings")
         if "." not in key and key not in known:
-            hint = VECTOR_ONLY.get(key, "")
+            hint = VECTOR_ONLY.get(key, "") if name == DESIGN else ""
             raise ConfigError(key, f"unknown key; known keys: {', '.join(sorted(known))}{hint}")
         if key in sections and isinstance(value, Mapping):
             assignments.update({f"{key}.{sub_key}": sub_value for sub_key, sub_value in value.items()})

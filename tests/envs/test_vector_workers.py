@@ -102,6 +102,9 @@ def test_a_bad_worker_count_is_a_one_line_error_before_any_process_starts(bad):
 def test_a_single_env_given_workers_says_where_they_belong():
     with pytest.raises(ConfigError, match=r"^workers: unknown key; .*gym\.make_vec\(id, num_envs=N, workers=P\)\)$"):
         gym.make(ID, workers=2, **SMALL)
+    with pytest.raises(ConfigError) as err:  # SpreaderTuning has no vector env of its own: no hint
+        gym.make("spreadgym/SpreaderTuning-v1", workers=2, **SMALL)
+    assert "make_vec" not in str(err.value)
 
 
 def test_workers_beyond_the_threads_are_refused(monkeypatch):
