@@ -763,7 +763,7 @@ def schedules(table: Table, library, until: float, granules: Optional[int], toy:
         launch_order = np.arange(n)
         found = {}
         for name, kwargs in (("queue, longest first (shipped)", {}), ("queue, launch order", {"order": launch_order}),
-                             ("one granule per thread", {"order": launch_order, "threads": n})):
+                             ("one granule per thread", {"order": launch_order, "queue": False})):
             out, outcome = np.zeros((n, granule_run.OUT_SIZE)), np.zeros(n, dtype=np.int8)
             launch = partial(cuda_spinner.run_all, *arrays, out, outcome, **kwargs)
             if time.time() > until - 2.0:

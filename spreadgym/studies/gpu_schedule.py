@@ -12,7 +12,8 @@ schedules, for several counts of threads the GPU keeps resident:
   its place until its slowest granule ends, the next block taking the place (how a GPU
   hands out blocks);
 - a queue in launch order: every resident thread takes the next granule as it ends one;
-- a queue longest first: the same, in `model.longest_first` order (the shipped one).
+- a queue longest first: the same, in `model.longest_first` order (the shipped one:
+  start radius bins), and for comparison in the order of a full sort by start radius.
 
 It is a model (no memory traffic, no divergence inside a pass, a uniform pass cost), so
 its figures are a forecast that a GPU measurement settles (agents/device_check.py,
@@ -80,6 +81,7 @@ def schedule_rows() -> list[dict]:
     spread: fewest, median, 99th percentile and most, the warps' longest runs summed over their mean
     runs (32 granules in launch order), the correlation of passes with start radius."""
     from spreadgym.physics.compiled.cuda_spinner import THREADS_PER_BLOCK
+    from spreadgym.physics.compiled.layout import DISC_RADIUS
     from spreadgym.physics.compiled.model import longest_first
 
     passes, start, design, params = pass_counts()
@@ -92,12 +94,15 @@ def schedule_rows() -> list[dict]:
     for designs in DESIGNS:
         tiles = designs // 64
         work = np.tile(passes, tiles)
-        order = longest_first(np.tile(start, (tiles, 1)), np.tile(design, tiles), params)
+        starts, owners = np.tile(start, (tiles, 1)), np.tile(design, tiles)
+        order = longest_first(starts, owners, params)
+        exact = np.argsort(np.hypot(starts[:, 0], starts[:, 1]) / params[owners, DISC_RADIUS], kind="stable")
         for resident in RESIDENT:
             grid, queue = one_per_thread(work, resident, THREADS_PER_BLOCK), queued(work, resident)
             first = queued(work[order], resident)
             rows.append({"designs": designs, "resident_threads": resident, "one_per_thread": grid,
                          "queue_launch_order": queue, "queue_longest_first": first,
+                         "queue_full_sort": queued(work[exact], resident),
                          "bound": max(work.sum() / resident, float(work.max())),
                          "speedup_queue": grid / queue, "speedup_longest_first": grid / first, **spread})
     return rows

@@ -48,12 +48,11 @@ def test_the_cuda_kernel_gives_the_cpu_results_in_one_launch_per_batch(cuda_simu
 
 
 QUEUED = """
-import json, numpy as np
+import json, threading, numpy as np
 from spreadgym.config.materials import load_library
 from spreadgym.config.scene import load_scene
 from spreadgym.physics.compiled import cuda_spinner, granule_run
-from spreadgym.physics.compiled.layout import DISC_RADIUS
-from spreadgym.physics.compiled.model import START_BINS, kernel_arrays, kernel_inputs, longest_first
+from spreadgym.physics.compiled.model import kernel_arrays, kernel_inputs, longest_first
 from spreadgym.spread.pipeline import plan_scene
 
 library = load_library()
@@ -64,36 +63,45 @@ n = int(counts.sum())
 cpu_out, cpu_outcome = np.zeros((n, granule_run.OUT_SIZE)), np.zeros(n, dtype=np.int8)
 granule_run.run_all(*arrays, cpu_out, cpu_outcome, np.empty((0, 1, 3)))
 order = longest_first(arrays[0], arrays[2], arrays[5])
-cuda_spinner.THREADS_PER_BLOCK = 4  # 2 blocks of 4 threads: each thread runs about 5 granules
-taken = []
+granule_of = {float(x): i for i, x in enumerate(arrays[0][:, 0])}  # a granule by its start's x
+taken = []  # (thread, granule) in the order the kernel ran them
 follow = cuda_spinner.granule_run.follow
 def counted(*args):
-    taken.append(args[0])
+    me = threading.current_thread()  # the simulator's thread of the kernel: its block and thread index
+    taken.append((me.blockIdx.x * cuda_spinner.THREADS_PER_BLOCK + me.threadIdx.x, granule_of[float(args[0])]))
     return follow(*args)
 cuda_spinner.granule_run.follow = counted
-bins = np.minimum((np.hypot(arrays[0][:, 0], arrays[0][:, 1]) / arrays[5][arrays[2], DISC_RADIUS] * START_BINS)
-                  .astype(int), START_BINS - 1)
-found = {"granules": n, "bins": len(set(bins.tolist())),
-         "order_is_the_stable_sort_of_the_bins": bool(np.array_equal(order, np.argsort(bins, kind="stable")))}
-for name, kwargs in (("longest first", {}), ("launch order", {"order": np.arange(n)})):
+found = {"granules": n, "distinct_starts": len(granule_of), "longest_first": order.tolist()}
+for name, block, kwargs in (("queue, longest first", 4, {"threads": 7}),
+                            ("queue, launch order", 4, {"threads": 7, "order": np.arange(n)}),
+                            ("queue, one thread", 1, {"threads": 1}),
+                            ("one per thread", 4, {"queue": False, "order": np.arange(n)[::-1].copy()})):
+    cuda_spinner.THREADS_PER_BLOCK = block
     taken.clear()
     out, outcome = np.full((n, granule_run.OUT_SIZE), np.nan), np.full(n, -1, dtype=np.int8)
-    cuda_spinner.run_all(*arrays, out, outcome, threads=7, **kwargs)
-    found[name] = {"out_equal": bool(np.array_equal(out, cpu_out)),
-                   "outcome_equal": bool(np.array_equal(outcome, cpu_outcome)), "runs": len(taken)}
+    cuda_spinner.run_all(*arrays, out, outcome, **kwargs)
+    found[name] = {"bits_equal": bool(np.array_equal(out, cpu_out) and np.array_equal(outcome, cpu_outcome)),
+                   "taken": taken.copy()}
 print(json.dumps(found))
 """
 
 
 def test_the_queue_gives_every_granule_its_cpu_bits_in_any_order(cuda_simulator):
-    """Fewer threads than granules (8 threads, 40 granules): each thread takes granules
-    from the queue until none is left, every granule runs once, and the departures and
-    outcomes are the CPU kernel's bits whether the queue hands them out longest first
-    (the granules sorted by start radius bin, launch order within a bin) or in launch order."""
+    """40 granules on the simulated GPU: the queue's 8 threads (2 blocks of 4, asked for 7)
+    take them until none is left, one thread alone takes them all in the queue's order
+    (longest first by default), and without the queue thread t takes order[t] alone; every
+    granule runs once and the departures and outcomes are the CPU kernel's bits each time."""
     found = cuda_simulator(QUEUED)
-    assert found["granules"] == 40 and found["bins"] > 3 and found["order_is_the_stable_sort_of_the_bins"]
-    for name in ("longest first", "launch order"):
-        assert found[name] == {"out_equal": True, "outcome_equal": True, "runs": 40}, name
+    n = found["granules"]
+    assert n == 40 == found["distinct_starts"]
+    for name in ("queue, longest first", "queue, launch order", "queue, one thread", "one per thread"):
+        assert found[name]["bits_equal"], name
+        assert sorted(g for _, g in found[name]["taken"]) == list(range(n)), name  # each granule once
+    for name in ("queue, longest first", "queue, launch order"):  # which of them run how many: the simulator's
+        assert {t for t, _ in found[name]["taken"]} <= set(range(8)), name  # thread switches decide
+    assert [g for _, g in found["queue, one thread"]["taken"]] == found["longest_first"]
+    assert found["longest_first"] != list(range(n))  # the default order is not launch order here
+    assert sorted(found["one per thread"]["taken"]) == [[t, n - 1 - t] for t in range(n)]
 
 
 @pytest.mark.skipif(device.cuda_available(), reason="a CUDA GPU is present: the no-GPU errors do not apply")

@@ -13,12 +13,13 @@ from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
+from numba import prange
 
 from spreadgym import device
 from spreadgym.config.scene import Scene
 from spreadgym.physics.compiled import granule_run
 from spreadgym.physics.compiled.layout import DISC_RADIUS, OMEGA_STEP, STEP, V_SIZE, pack_parameters, pack_vanes
-from spreadgym.physics.compiled.options import KERNEL
+from spreadgym.physics.compiled.options import KERNEL, PARALLEL
 from spreadgym.physics.contacts import Contacts
 from spreadgym.physics.departure import Departure
 from spreadgym.physics.granules import GranuleBatch, rotate
@@ -28,10 +29,11 @@ from spreadgym.physics.vertical import free_fall_to
 from spreadgym.threads import numba_threads, thread_map
 
 MAX_TRACK_POINTS = 20_000
-START_BINS = 16
+START_BINS = 64
 """Bins of a granule's start radius (a fraction of its disc's) for the GPU queue's order
-(`longest_first`): a schedule model gave the same kernel time with 4 to 64 bins as with a
-full sort (docs/performance.md, the CUDA backend)."""
+(`longest_first`): in the schedule model (`make bench` section gpu-schedule) the kernel
+times came within 1.6 % of those with a full sort by start radius."""
+SORT_PARTS = 64  # parts of the order's counting sort, shared out over the threads
 
 
 @dataclass(frozen=True)
@@ -107,24 +109,37 @@ def kernel_arrays(batch: list[KernelInputs]) -> tuple[tuple[np.ndarray, ...], np
     return arrays, counts
 
 
-@KERNEL
-def longest_first(start, design, P):
-    """The queue's order of the granules (indices): those starting nearest their disc's
+def longest_first(start: np.ndarray, design: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """The GPU queue's order of the granules (indices): those starting nearest their disc's
     axis first, in START_BINS bins of start radius over disc radius, launch order within a
-    bin (a counting sort: two passes over the granules, about 15 ns a granule)."""
+    bin. A counting sort over SORT_PARTS consecutive parts on spreadgym's threads (the order
+    does not depend on their count): two passes over the granules."""
+    with numba_threads():
+        return _counting_sort(start, design, P)
+
+
+@PARALLEL
+def _counting_sort(start, design, P):
     n = start.shape[0]
+    parts = max(1, min(SORT_PARTS, n))
     bins = np.empty(n, dtype=np.int64)
-    first = np.zeros(START_BINS + 1, dtype=np.int64)
-    for i in range(n):
-        reach = math.sqrt(start[i, 0] ** 2 + start[i, 1] ** 2) / P[design[i], DISC_RADIUS]
-        bins[i] = min(max(int(reach * START_BINS), 0), START_BINS - 1)
-        first[bins[i] + 1] += 1
+    counts = np.zeros((parts, START_BINS), dtype=np.int64)
+    for c in prange(parts):
+        for i in range(c * n // parts, (c + 1) * n // parts):
+            reach = math.sqrt(start[i, 0] ** 2 + start[i, 1] ** 2) / P[design[i], DISC_RADIUS]
+            bins[i] = min(max(int(reach * START_BINS), 0), START_BINS - 1)
+            counts[c, bins[i]] += 1
+    place = np.empty((parts, START_BINS), dtype=np.int64)  # where part c's next granule of bin b goes
+    filled = 0
     for b in range(START_BINS):
-        first[b + 1] += first[b]
+        for c in range(parts):
+            place[c, b] = filled
+            filled += counts[c, b]
     order = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        order[first[bins[i]]] = i
-        first[bins[i]] += 1
+    for c in prange(parts):
+        for i in range(c * n // parts, (c + 1) * n // parts):
+            order[place[c, bins[i]]] = i
+            place[c, bins[i]] += 1
     return order
 
 
