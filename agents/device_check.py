@@ -37,13 +37,13 @@ cut short still returns what it did):
    - CPU against GPU on one batch (paper at 2048 granules, varied rpm and seeds, plus
      twin-field and field scenes): outcome counts per design, tray masses, CV at the
      target, departure speeds;
+   - the spinner kernel alone under three schedules (the shipped queue of granules handed
+     out longest first, the queue in launch order, one granule per thread), at 1024 and
+     4096 designs, their outputs compared to the bit;
    - the spinner stage alone (`model.simulate_compiled_batch`, host<->device copies
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
      call's three steps timed once apart;
-   - the spinner kernel alone under three schedules (the shipped queue of granules handed
-     out longest first, the queue in launch order, one granule per thread), at 1024 and
-     4096 designs, their outputs compared to the bit;
    - the whole `run_batch` and the vector env with device "cuda" and "cpu" (16 threads).
 
 Every section is guarded (its error is one printed line), capped in time, and the whole
@@ -598,13 +598,13 @@ def gpu_main(args) -> None:
             report["match"] = compare_devices(library, granules, toy)
             write_json(out / "gpu.json", report)
         spinner = Table(out / "gpu_spinner.csv")
+        with section("GPU schedules of the spinner kernel", 60) as until:  # first: the figure not yet measured
+            schedules(spinner, library, until, granules, toy, cores)
         with section("spinner stage alone: GPU, CPU 1 and 16 threads", args.spinner_cap_s) as until:
             spinner_stage(spinner, library, until, granules, toy, cores)
         batch = Table(out / "gpu_batch.csv")
         with section("run_batch and the vector env, cuda against cpu", args.batch_cap_s) as until:
             whole_batches(batch, library, until, granules, toy, cores)
-        with section("GPU schedules of the spinner kernel", 60) as until:
-            schedules(spinner, library, until, granules, toy, cores)
     finally:
         threads.set_threads(None)
         write_json(out / "gpu.json", report)
