@@ -884,11 +884,15 @@ def summary(out: Path) -> None:
                 lines.append("  GPU vs CPU: " + ", ".join(f"{k}={v}" for k, v in match.items()))
     spinner = rows_of("gpu_spinner.csv")
     if spinner:
-        lines.append("Spinner stage (simulate_compiled_batch), designs/s [M granule-runs/s]:")
+        lines.append("Spinner stage (simulate_compiled_batch; kernel alone where a schedule is named), "
+                     "designs/s [M granule-runs/s]:")
         for r in spinner:
+            note = r.get("note") or ""
+            schedule = note.split(";")[0].removeprefix("kernel alone, ") if note.startswith("kernel alone") else ""
             lines.append(f"  {r['device']:4s} {r['threads']:>2s} thr tpb {r['threads_per_block'] or '-':>3s} "
                          f"{r['designs']:>5s} designs: {num(r['designs_per_s']):>9s} "
-                         f"[{num(float(r['granule_runs_per_s']) / 1e6, 2)}] x{r['repeats']}")
+                         f"[{num(float(r['granule_runs_per_s']) / 1e6, 2)}] x{r['repeats']}"
+                         + (f"  {schedule} (same bits: {note.rsplit(': ', 1)[-1]})" if schedule else ""))
     batch = rows_of("gpu_batch.csv")
     if batch:
         lines.append(f"Whole batch of paper designs, {batch[0]['threads']} threads finishing (vector env: steps/s):")
