@@ -194,13 +194,13 @@ def test_compare_groups_labelled_runs_and_normalises_with_references(plain_model
 def test_legend_labels_drop_a_policy_files_folders_stay_short_and_stay_apart():
     from spreadgym.agents.commands.compare import legend_labels
 
-    assert legend_labels({"a": "/tmp/runs/a/rule.py:policy", "b": "centre action"}) == {
+    assert legend_labels({"a": "runs/a/rule.py:policy", "b": "centre action"}) == {
         "a": "rule.py:policy", "b": "centre action"}
     long = legend_labels({"a": "x" * 50})["a"]
     assert len(long) == 32 and long.endswith("\u2026")
     # two policy files of one name: their ends tell them apart
-    apart = legend_labels({"p": "/tmp/runs/ppo/policy.py:act", "s": "/tmp/runs/sac/policy.py:act"})
-    assert apart == {"p": "/tmp/runs/ppo/policy.py:act", "s": "/tmp/runs/sac/policy.py:act"}
+    apart = legend_labels({"p": "runs/ppo/policy.py:act", "s": "runs/sac/policy.py:act"})
+    assert apart == {"p": "runs/ppo/policy.py:act", "s": "runs/sac/policy.py:act"}
     deep = {m: "/a" * 30 + f"/{m}/policy.py:act" for m in ("ppo", "sac")}
     assert legend_labels(deep) == {m: "\u2026" + t[-31:] for m, t in deep.items()}  # "...a/a/ppo/policy.py:act"
 
