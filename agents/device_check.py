@@ -44,7 +44,9 @@ cut short still returns what it did):
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
      call's three steps timed once apart;
-   - the whole `run_batch` and the vector env with device "cuda" and "cpu" (16 threads).
+   - the vector env with device "cuda" in one process and in 16 worker processes sharing
+     the GPU (one thread each; rewards compared to the one-process GPU run's), and with
+     "cpu" (16 threads); then the whole `run_batch` on "cuda" and "cpu".
 
 Every section is guarded (its error is one printed line), capped in time, and the whole
 run keeps to `--deadline-s` from its start (the CPU sections leave `--gpu-reserve-s` of
@@ -783,7 +785,9 @@ def schedules(table: Table, library, until: float, granules: Optional[int], toy:
 
 
 def whole_batches(table: Table, library, until: float, granules: Optional[int], toy: bool, cores: int) -> None:
-    """run_batch of paper designs and the vector env's steps, device cuda and cpu, all threads."""
+    """run_batch of paper designs and the vector env's steps, device cuda and cpu, all
+    threads; the vector env on cuda also in `cores` worker processes sharing the GPU (one
+    thread each), its rewards compared to the one-process GPU run's to the bit."""
     from numba import cuda
 
     from spreadgym import device
@@ -793,45 +797,51 @@ def whole_batches(table: Table, library, until: float, granules: Optional[int], 
     scenes = paper_designs(max(sizes), granules, seed0=5000)
     rewards: dict = {}
 
-    def batch_rate(name: str, size: int) -> None:
+    def batch_rate(name: str, size: int, workers: int) -> None:
         sync = cuda.synchronize if name == "cuda" else (lambda: None)
         with device.using(name):
             times, _ = timed(lambda: run_batch(scenes[:size], library=library, ci=False), 3,
                              min(until, time.time() + 15.0), sync=sync)
         median, low, high = spread_of(times)
-        table.add({"what": "run_batch paper", "device": name, "threads": cores, "batch": size,
+        table.add({"what": "run_batch paper", "device": name, "threads": cores, "workers": workers, "batch": size,
                    "designs_per_s": size / median, "low": size / high, "high": size / low, "repeats": len(times)})
         say(f"run_batch  {name:4s} {size:5d}: {size / median:8.1f} designs/s ({len(times)} blocks)")
 
-    def env_rate(name: str, size: int) -> None:
-        venv = vector_env(size, device=name, granules=granules)
+    def env_rate(name: str, size: int, workers: int) -> None:
+        started = time.perf_counter()
+        venv = vector_env(size, device=name, granules=granules, workers=workers)
         steps: list = []
         try:
             venv.reset(seed=0)
             venv.action_space.seed(0)
+            built_s = time.perf_counter() - started
             times, _ = timed(lambda: steps.append(venv.step(venv.action_space.sample())[1]), 3,
                              min(until, time.time() + 15.0))
         finally:
             venv.close()
-        rewards[name, size] = np.concatenate(steps)
+        rewards[name, size, workers] = np.concatenate(steps)
         median, low, high = spread_of(times)
-        row = {"what": "vector env steps", "device": name, "threads": cores, "batch": size,
-               "designs_per_s": size / median, "low": size / high, "high": size / low, "repeats": len(times)}
-        other = rewards.get(("cuda", size))
-        if name == "cpu" and other is not None and other.shape == rewards[name, size].shape:
-            row["max_abs_reward_diff_vs_cuda"] = float(np.abs(rewards[name, size] - other).max())
+        row = {"what": "vector env steps", "device": name, "threads": cores, "workers": workers, "batch": size,
+               "designs_per_s": size / median, "low": size / high, "high": size / low, "repeats": len(times),
+               "built_and_reset_s": built_s}
+        other = rewards.get(("cuda", size, 1))
+        if (name, workers) != ("cuda", 1) and other is not None and other.shape == rewards[name, size, workers].shape:
+            row["max_abs_reward_diff_vs_cuda"] = float(np.abs(rewards[name, size, workers] - other).max())
         table.add(row)
-        say(f"vector env {name:4s} {size:5d}: {size / median:8.1f} steps/s ({len(times)} blocks)"
-            + (f", max |reward cpu - cuda| {row['max_abs_reward_diff_vs_cuda']:.3g}"
+        say(f"vector env {name:4s} {size:5d} {workers:2d} workers: {size / median:8.1f} steps/s ({len(times)} blocks)"
+            + (f", max |reward - cuda's| {row['max_abs_reward_diff_vs_cuda']:.3g}"
                if "max_abs_reward_diff_vs_cuda" in row else ""))
 
-    for what, measure, reserve in (("run_batch", batch_rate, 10.0), ("vector env", env_rate, 15.0)):
+    spread = 2 if toy else cores  # worker processes sharing the GPU
+    for what, measure, reserve, runs in (
+            ("vector env", env_rate, 15.0, (("cuda", 1), ("cuda", spread), ("cpu", 1))),  # first: the new figure
+            ("run_batch", batch_rate, 10.0, (("cuda", 1), ("cpu", 1)))):
         for size in sizes:
-            for name in ("cuda", "cpu"):
+            for name, workers in runs:
                 if time.time() > until - reserve:
-                    say(f"out of time before {what} {name} {size}")
+                    say(f"out of time before {what} {name} {size} ({workers} workers)")
                     continue
-                guarded(f"{what} {name} {size}", measure, name, size)
+                guarded(f"{what} {name} {size} ({workers} workers)", measure, name, size, workers)
 
 
 # ----------------------------------------------------------------------------- summary
@@ -897,8 +907,10 @@ def summary(out: Path) -> None:
     if batch:
         lines.append(f"Whole batch of paper designs, {batch[0]['threads']} threads finishing (vector env: steps/s):")
         for r in batch:
-            lines.append(f"  {r['what']:18s} {r['device']:4s} {r['batch']:>5s}: {num(r['designs_per_s']):>8s}"
-                         f" x{r['repeats']}")
+            lines.append(f"  {r['what']:18s} {r['device']:4s} {r['batch']:>5s} {r.get('workers') or '1':>2s} workers:"
+                         f" {num(r['designs_per_s']):>8s} x{r['repeats']}"
+                         + (f"  (max |reward - cuda's| {r['max_abs_reward_diff_vs_cuda']})"
+                            if r.get("max_abs_reward_diff_vs_cuda") else ""))
     lines.append(f"total {CLOCK.elapsed():.0f} s")
     print("\n".join(lines), flush=True)
 

@@ -22,9 +22,10 @@ docs/benchmark.md has every rung's rates.
 `workers=P` (default 1) runs the sub-envs in P worker processes, contiguous blocks of
 near-equal size, each block a vector env of its own with its share of the threads
 (envs/shards.py): the Python around each batch, one thread's work in one process, then
-runs P at a time. Same bits as one process; P at most the threads spreadgym may use, and 1
-on a GPU. Two workers of one thread gave 1.08-1.10x one process of two threads on two
-cores (docs/performance.md).
+runs P at a time. Same bits as one process; P at most the threads spreadgym may use. On a
+GPU (`device="cuda"`) each worker launches its own batches on the same GPU, so the Python
+around the launches, which bounds one process there, runs P at a time too. Two workers of
+one thread gave 1.08-1.10x one process of two threads on two cores (docs/performance.md).
 
 Size: any `num_envs`. A step runs its designs in batches of at most MAX_GRANULE_COPIES
 landing points (sim.granules x sim.angle_copies x discs per design: `spreadgym simulate`'s
@@ -87,7 +88,7 @@ class SpinnerDesignVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self._first = first
         self._shards: Optional[Shards] = None
-        workers = _checked_workers(workers, self.num_envs, first)
+        workers = _checked_workers(workers, self.num_envs)
         if workers == 1:
             self.envs = [first] + [_sharing_task(first) for _ in range(self.num_envs - 1)]
         else:
@@ -322,15 +323,13 @@ def batched(env: SpinnerDesignEnv) -> bool:
     return cfg.precision is None and env.render_mode is None
 
 
-def _checked_workers(workers, num_envs: int, first: SpinnerDesignEnv) -> int:
-    """`workers` as a count of processes: 1 to min(num_envs, the threads spreadgym may use),
-    and 1 where the spinner runs on a GPU (one process drives it)."""
+def _checked_workers(workers, num_envs: int) -> int:
+    """`workers` as a count of processes: 1 to min(num_envs, the threads spreadgym may use)
+    (on a GPU too: the workers share it, each with its share of the threads)."""
     count = threads.thread_count()
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 1 <= workers <= num_envs:
         raise ConfigError("workers", f"expected a whole number of processes from 1 to num_envs={num_envs}, "
                                      f"got {workers!r}")
-    if workers > 1 and _device_of(first) == "cuda":
-        raise ConfigError("workers", "one process drives the GPU: use workers=1 with device='cuda'")
     if workers > count:
         raise ConfigError("workers", f"{workers} processes for the {count} threads spreadgym may use here "
                                      f"(SPREADGYM_THREADS, the cores); allowed: 1 to {count}")

@@ -107,9 +107,7 @@ def run(args: argparse.Namespace) -> int:
     if args.device is not None:
         from spreadgym.device import checked
 
-        checked(args.device, "--device")
-        if args.device == "cuda" and args.workers > 1:  # one process drives the GPU: the two never multiply
-            raise SpreadgymError("--device cuda: one process drives the GPU; use --workers 1")
+        checked(args.device, "--device")  # with --workers, each worker's searches launch on the same GPU
     started = time.perf_counter()
     from spreadgym.threads import set_threads, shares
 

@@ -28,14 +28,21 @@ def test_an_env_on_a_missing_gpu_fails_at_make_in_one_line():
     assert "\n" not in str(error.value)
 
 
-def test_workers_with_a_gpu_are_refused_in_one_line(cuda_simulator):
-    """One process drives the GPU: the vector env's worker processes are for the CPU."""
+def test_workers_share_the_simulated_gpu_with_the_cpu_rewards(cuda_simulator):
+    """The vector env's worker processes may share a GPU: two workers on the simulated GPU
+    step as one process on the CPU (rewards and observations bit for bit), each worker
+    launching its own block's batch (a CUDA launch that fails makes this test fail)."""
     found = cuda_simulator(
-        "import json, gymnasium as gym, spreadgym\n"
-        "from spreadgym.errors import ConfigError\n"
-        "try:\n"
-        "    gym.make_vec('spreadgym/SpinnerDesign-v1', num_envs=2, workers=2, granules=32, device='cuda')\n"
-        "    print(json.dumps({'error': None}))\n"
-        "except ConfigError as error:\n"
-        "    print(json.dumps({'error': str(error)}))\n")
-    assert found["error"] == "workers: one process drives the GPU: use workers=1 with device='cuda'"
+        "import json, numpy as np, gymnasium as gym, spreadgym\n"
+        "out = {}\n"
+        "for dev, workers in (('cpu', 1), ('cuda', 2)):\n"
+        "    venv = gym.make_vec('spreadgym/SpinnerDesign-v1', num_envs=3, workers=workers, granules=24, device=dev,\n"
+        "                        autoreset_mode='same_step')\n"
+        "    venv.reset(seed=11)\n"
+        "    venv.action_space.seed(5)\n"
+        "    obs, reward, *_ = venv.step(venv.action_space.sample())\n"
+        "    out[dev] = {'obs': obs.tolist(), 'reward': reward.tolist()}\n"
+        "    venv.close()\n"
+        "print(json.dumps(out))\n")
+    assert found["cuda"] == found["cpu"]
+    assert len(set(found["cpu"]["reward"])) == 3  # three designs, three rewards: not a constant

@@ -3,6 +3,11 @@ tests/envs/test_env_device.py) under numba's CUDA simulator (the `cuda_simulator
 the kernel's granule index, design index, copies in and out, against the CPU kernel on
 small batches; and the one-line errors where no GPU is found."""
 
+import json
+import os
+import subprocess
+import sys
+
 import pytest
 
 from spreadgym import device
@@ -130,9 +135,23 @@ def test_the_device_names_and_their_order(monkeypatch):
         device.set_device(None)
 
 
-def test_compare_drives_one_gpu_from_one_process(capsys, monkeypatch):
-    """Workers and devices never multiply: with a GPU (faked here), --device cuda with two
-    worker processes is refused."""
-    monkeypatch.setattr(device, "cuda_available", lambda: True)
-    code = main(["compare", "--device", "cuda", "--workers", "2", "--budget", "2", "--methods", "random"])
-    assert code == 2 and "--workers 1" in capsys.readouterr().err
+COMPARED = """
+import json, sys
+from spreadgym.cli.main import main
+for device, workers in (("cpu", "1"), ("cuda", "2")):
+    main(["compare", "--device", device, "--workers", workers, "--budget", "2", "--methods", "random", "centre",
+          "--granules", "24", "--fertilizers", "pellet", "--swaths", "2.9", "--force",
+          "--out", sys.argv[1] + "/" + device])
+"""
+
+
+def test_compare_workers_share_the_simulated_gpu_with_the_cpu_scores(tmp_path):
+    """--device cuda with two worker processes (each search launching on the same GPU)
+    scores as one process on the CPU: the same CV, reward and swath for every method."""
+    done = subprocess.run([sys.executable, "-c", COMPARED, str(tmp_path)], capture_output=True, text=True,
+                          timeout=900, env={**os.environ, "NUMBA_ENABLE_CUDASIM": "1"})
+    assert done.returncode == 0, done.stderr[-3000:]
+    tables = [json.loads((tmp_path / device / "compare.json").read_text())["table"] for device in ("cpu", "cuda")]
+    keys = ("method", "cv_percent", "reward", "effective_swath_m", "simulations")
+    cpu, gpu = ([{k: row[k] for k in keys} for row in table] for table in tables)
+    assert cpu == gpu and len(cpu) == 2
