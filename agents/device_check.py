@@ -33,13 +33,16 @@ cut short still returns what it did):
    the 16-thread series wait for the compile to end first (at most `--compile-wait-s`;
    each row says whether the compile was still running), and the GPU process waits for
    the CPU series to end before it times anything, so no other timing shares the machine
-   with the other process's work. Then (gpu.json, gpu_spinner.csv, gpu_batch.csv):
+   with the other process's work. Then (gpu.json, gpu_spinner.csv, gpu_flight.csv, gpu_batch.csv):
    - CPU against GPU on one batch (paper at 2048 granules, varied rpm and seeds, plus
      twin-field and field scenes): outcome counts per design, tray masses, CV at the
      target, departure speeds;
    - the spinner kernel alone under three schedules (the shipped queue of granules handed
      out longest first, the queue in launch order, one granule per thread), at 1024 and
      4096 designs, their outputs compared to the bit;
+   - the flight alone (`flight.fly` on "cuda", one launch, against the CPU kernel in parts
+     on the 16 threads), 64 and 1024 designs' worth of synthetic launches, the landing
+     points compared (gpu_flight.csv);
    - the spinner stage alone (`model.simulate_compiled_batch`, host<->device copies
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
@@ -53,8 +56,9 @@ run keeps to `--deadline-s` from its start (the CPU sections leave `--gpu-reserv
 it to the GPU). Without a GPU the GPU section says so and stops. `--quick` shrinks the CPU
 sections for a dry run on a small machine (24 designs, two thread counts); `--gpu-sim`
 runs the GPU section on numba's CUDA simulator at toy sizes (a check of this script, not
-a timing). At most 7 files come back: env.json, cpu_scaling.csv, cpu_stages.csv,
-gpu.json, gpu_spinner.csv, gpu_batch.csv and the shell script's device_check.log.
+a timing). At most 8 files come back: env.json, cpu_scaling.csv, cpu_stages.csv,
+gpu.json, gpu_spinner.csv, gpu_flight.csv, gpu_batch.csv and the shell script's
+device_check.log.
 """
 
 from __future__ import annotations
@@ -584,6 +588,10 @@ def gpu_main(args) -> None:
             report["second_launch_s"] = time.perf_counter() - started
             say(f"compiled and launched in {report['compile_and_first_launch_s']:.1f} s; "
                 f"again in {report['second_launch_s'] * 1e3:.1f} ms")
+            started = time.perf_counter()
+            fly_parts(64, 1, "cuda")
+            report["flight_compile_and_first_launch_s"] = time.perf_counter() - started
+            say(f"flight kernel compiled and launched in {report['flight_compile_and_first_launch_s']:.1f} s")
     finally:
         write_json(out / "gpu.json", report)
         (work / "compiled").write_text(json.dumps(report, default=str))
@@ -602,6 +610,8 @@ def gpu_main(args) -> None:
         spinner = Table(out / "gpu_spinner.csv")
         with section("GPU schedules of the spinner kernel", 60) as until:  # first: the figure not yet measured
             schedules(spinner, library, until, granules, toy, cores)
+        with section("flights alone: GPU against CPU", 40) as until:
+            flights(Table(out / "gpu_flight.csv"), until, toy, cores)
         with section("spinner stage alone: GPU, CPU 1 and 16 threads", args.spinner_cap_s) as until:
             spinner_stage(spinner, library, until, granules, toy, cores)
         batch = Table(out / "gpu_batch.csv")
@@ -659,6 +669,61 @@ def compare_devices(library, granules: Optional[int], toy: bool) -> dict:
     }
     say("match: " + ", ".join(f"{k} {v}" for k, v in summary.items()))
     return {"summary": summary, "per_design": rows}
+
+
+def launches(n: int, seed: int = 0):
+    """(position, height, velocity, diameter) of n synthetic launches like a paper spinner's:
+    0.15 m from the axis, 0.8 m up, 18-32 m/s outwards, 2-4 mm granules (SI units)."""
+    rng = np.random.default_rng(seed)
+    angle = rng.uniform(0.0, 2.0 * np.pi, n)
+    out = np.c_[np.cos(angle), np.sin(angle)]
+    speed = rng.uniform(18.0, 32.0, n)
+    velocity = np.c_[out * speed[:, None], rng.normal(0.0, 1.0, n)]
+    return 0.15 * out, np.full(n, 0.8), velocity, rng.uniform(2e-3, 4e-3, n)
+
+
+def flights(table: Table, until: float, toy: bool, cores: int) -> None:
+    """The flight alone: one GPU launch (`cuda_flight`) against the CPU kernel in 4 x `cores`
+    parts on the threads (as the plain finish runs it), 64 and 1024 designs' worth of
+    granules (2048 each), the landing points compared."""
+    from numba import cuda
+
+    for designs in ((1, 2) if toy else (64, 1024)):
+        n = designs * (40 if toy else 2048)
+        flown = {}
+        for name in ("cuda", "cpu"):
+            if time.time() > until - 3.0:
+                say(f"out of time before the flights on {name} at {designs} designs")
+                continue
+            times, flown[name] = timed(partial(fly_parts, n, 1 if name == "cuda" else 4 * cores, name), 3,
+                                       min(until, time.time() + 10.0),
+                                       sync=cuda.synchronize if name == "cuda" else (lambda: None))
+            median, low, high = spread_of(times)
+            row = {"device": name, "threads": cores, "designs": designs, "granules": n, "repeats": len(times),
+                   "median_s": median, "granules_per_s": n / median, "designs_per_s": designs / median}
+            if name == "cpu" and "cuda" in flown:
+                gap = np.abs(flown["cuda"] - flown["cpu"])
+                row["landings_bit_equal"] = int(np.sum(np.all(gap == 0.0, axis=1)))
+                row["max_landing_diff_m"] = float(gap.max())
+            table.add(row)
+            say(f"flight {name:4s} {designs:5d} designs: {median * 1e3:8.1f} ms ({n / median / 1e6:6.2f} M granules/s)"
+                + (f", landings equal {row['landings_bit_equal']}/{n}, max diff {row['max_landing_diff_m']:.2g} m"
+                   if "max_landing_diff_m" in row else ""))
+
+
+def fly_parts(n: int, parts: int, name: str) -> np.ndarray:
+    """Landing points of n synthetic launches (`launches`) flown in `parts` `flight.fly`
+    calls side by side on the threads, on device `name` (the paper scene's flight)."""
+    from spreadgym.config.scene import load_scene
+    from spreadgym.spread import flight
+    from spreadgym.threads import thread_map
+
+    paper = load_scene("paper").flight
+    position, height, velocity, diameter = launches(n)
+    rows = np.array_split(np.arange(n), parts)
+    found = thread_map(lambda i: flight.fly(position[rows[i]], height[rows[i]], velocity[rows[i]], diameter[rows[i]],
+                                            1734.0, paper, device=name).position_m, parts)
+    return np.concatenate(found)
 
 
 def spinner_runs_of(count: int, library, granules: Optional[int], unique: int = 512):
@@ -903,6 +968,14 @@ def summary(out: Path) -> None:
                          f"{r['designs']:>5s} designs: {num(r['designs_per_s']):>9s} "
                          f"[{num(float(r['granule_runs_per_s']) / 1e6, 2)}] x{r['repeats']}"
                          + (f"  {schedule} (same bits: {note.rsplit(': ', 1)[-1]})" if schedule else ""))
+    flown = rows_of("gpu_flight.csv")
+    if flown:
+        lines.append("Flights alone (designs of 2048 granules), designs/s:")
+        for r in flown:
+            lines.append(f"  {r['device']:4s} {r['threads']:>2s} thr {r['designs']:>5s} designs: "
+                         f"{num(r['designs_per_s']):>9s} x{r['repeats']}"
+                         + (f"  (landings equal {r['landings_bit_equal']}/{r['granules']}, max diff "
+                            f"{r['max_landing_diff_m']} m)" if r.get("max_landing_diff_m") else ""))
     batch = rows_of("gpu_batch.csv")
     if batch:
         lines.append(f"Whole batch of paper designs, {batch[0]['threads']} threads finishing (vector env: steps/s):")

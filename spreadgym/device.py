@@ -4,10 +4,11 @@ The device is, first found: the one `using` holds on this thread (an environment
 `device` keyword), what `set_device` was given (the CLI's `--device`), the environment
 variable SPREADGYM_DEVICE, else "cpu". On "cuda" the spinner stage of a run or a batch
 is one kernel launch over all its granules (`physics.compiled.cuda_spinner`: the CPU
-kernel's own scalar functions compiled by numba.cuda); everything after the spinner
-stays on the CPU threads (`spreadgym.threads`). One process drives one GPU, from the
-thread that runs the batch, so threads and devices never multiply: the CPU threads
-finish the designs the one launch computed.
+kernel's own scalar functions compiled by numba.cuda), and so are a batch's flights of
+plain designs (`spread.cuda_flight`); the rest of the finish stays on the CPU threads
+(`spreadgym.threads`). A process drives the GPU from the thread that runs its batch;
+worker processes (the vector env's `workers`) each drive it for their own batches, with
+their shares of the threads, so threads and devices never multiply.
 
 numba's CUDA target is optional (`pip install spreadgym[cuda]` adds NVIDIA's
 numba-cuda); nothing here imports it unless "cuda" is asked for. Asking for it where no

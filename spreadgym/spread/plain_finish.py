@@ -34,7 +34,7 @@ from typing import Sequence
 
 import numpy as np
 
-from spreadgym import threads
+from spreadgym import device, threads
 from spreadgym.physics.compiled import pcg64
 from spreadgym.physics.departure import Departure, tilted_by_cone
 from spreadgym.spread import discs, estimate, pattern, rotations
@@ -163,7 +163,9 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
              counts: np.ndarray, flown: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Landing points (M, 2; disc frame) and times (M,) of the departed granules of all
     designs, in order: designs that fly alike (one flight, the lift on or off) in parts on
-    the threads, each part a `flight.fly` call given the lift of its designs."""
+    the threads, each part a `flight.fly` call given the lift of its designs; on a GPU
+    (this thread's device "cuda"), one launch for each kind, from this thread."""
+    on = device.current()
     heights = np.repeat([s.spinner.height_m for s in scenes], counts)
     position, height, velocity, spin = launch_columns(every.launch, departed, heights)
     diameter = every.granules.diameter_m[departed]
@@ -177,7 +179,8 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
             kinds.append(kind := (scene.flight, lift, []))
         kind[2].append(d)
     parts = []  # (flight, lift, granule rows: a slice or indices)
-    step = int(np.clip(-(-owner.size // (PARTS_PER_THREAD * threads.thread_count())), SMALLEST_PART, PART_GRANULES))
+    step = (max(owner.size, 1) if on == "cuda" else
+            int(np.clip(-(-owner.size // (PARTS_PER_THREAD * threads.thread_count())), SMALLEST_PART, PART_GRANULES)))
     for flight, lift, members in kinds:
         rows = np.flatnonzero(np.isin(owner, members)) if len(kinds) > 1 else None
         size = owner.size if rows is None else rows.size
@@ -189,8 +192,12 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
     def fly(p: int) -> None:
         flight, lift, rows = parts[p]
         landed = flight_model.fly(position[rows], height[rows], velocity[rows], diameter[rows], density[rows], flight,
-                                  spin_rad_s=spin[rows], lift=lift)
+                                  spin_rad_s=spin[rows], lift=lift, device=on)
         landing_xy[rows], landing_t[rows] = landed.position_m, landed.time_s
 
-    threads.thread_map(fly, len(parts))
+    if on == "cuda":
+        for p in range(len(parts)):
+            fly(p)
+    else:
+        threads.thread_map(fly, len(parts))
     return landing_xy, landing_t

@@ -33,14 +33,11 @@ from __future__ import annotations
 from typing import Optional
 
 import numpy as np
+from numba import config, float64
 
-if not hasattr(np, "row_stack"):  # numba-cuda 0.30 registers np.row_stack (an alias of vstack, gone in numpy 2.5)
-    np.row_stack = np.vstack  # as it loads its target: without it no kernel compiles (seen on numpy 2.5.2)
-
-from numba import config, cuda, float64  # noqa: E402 (after the alias above)
-
-from spreadgym.physics.compiled import face_motion, granule_run  # noqa: E402
-from spreadgym.physics.compiled.model import longest_first  # noqa: E402
+from spreadgym.physics.compiled import face_motion, granule_run
+from spreadgym.physics.compiled.cuda_target import cuda, host_array  # numba's CUDA target, loaded there
+from spreadgym.physics.compiled.model import longest_first
 
 SCRATCH = (2, face_motion.EVENTS)  # a module constant: numba.cuda sizes local arrays from constants only
 THREADS_PER_BLOCK = 64
@@ -50,17 +47,6 @@ RESIDENT_THREADS_PER_SM = 2048
 (2048 on Volta, A100 and H100/H200, fewer on others; this kernel's registers allow 320 on
 sm_90). Blocks beyond what fits wait, then find the queue empty and end at once."""
 SIMULATED_THREADS = 128  # the grid under numba's CUDA simulator (it has no device to ask)
-
-
-if config.ENABLE_CUDASIM:
-    def _array(view):
-        """The simulator runs kernels as Python and hands them wrapped arrays; the CPU
-        functions the kernel calls take numpy's (the wrapped one's memory)."""
-        return view._item._ary
-else:
-    @cuda.jit(device=True, inline=True)
-    def _array(view):
-        return view
 
 
 @cuda.jit(cache=True)  # the GPU compile takes minutes (200 s for sm_90 on the two-core machine): once per install
@@ -75,8 +61,9 @@ def _run_queue(order, taken, queued, start, radius, design, z0, vz0, P, V, vane_
     while k < order.shape[0]:
         i = order[k]
         d = design[i]
-        outcome[i] = granule_run.follow(start[i, 0], start[i, 1], radius[i], z0[d], vz0[d], _array(P[d]),
-                                        _array(V[d, :vane_count[d]]), _array(out[i]), _array(no_track), work)
+        outcome[i] = granule_run.follow(start[i, 0], start[i, 1], radius[i], z0[d], vz0[d], host_array(P[d]),
+                                        host_array(V[d, :vane_count[d]]), host_array(out[i]), host_array(no_track),
+                                        work)
         if queued:
             k = cuda.atomic.add(taken, 0, 1)
         else:
