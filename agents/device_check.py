@@ -37,6 +37,9 @@ cut short still returns what it did):
    - CPU against GPU on one batch (paper at 2048 granules, varied rpm and seeds, plus
      twin-field and field scenes): outcome counts per design, tray masses, CV at the
      target, departure speeds;
+   - the vector env with device "cuda" in one process and in 16 worker processes sharing
+     the GPU (one thread each; rewards compared to the one-process GPU run's), and with
+     "cpu" (16 threads); then the whole `run_batch` on "cuda" and "cpu";
    - the spinner kernel alone under three schedules (the shipped queue of granules handed
      out longest first, the queue in launch order, one granule per thread), at 1024 and
      4096 designs, their outputs compared to the bit;
@@ -46,10 +49,8 @@ cut short still returns what it did):
    - the spinner stage alone (`model.simulate_compiled_batch`, host<->device copies
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
-     call's three steps timed once apart;
-   - the vector env with device "cuda" in one process and in 16 worker processes sharing
-     the GPU (one thread each; rewards compared to the one-process GPU run's), and with
-     "cpu" (16 threads); then the whole `run_batch` on "cuda" and "cpu".
+     call's three steps timed once apart.
+   In that order: what is least known first, so a run cut short keeps it.
 
 Every section is guarded (its error is one printed line), capped in time, and the whole
 run keeps to `--deadline-s` from its start (the CPU sections leave `--gpu-reserve-s` of
@@ -558,7 +559,7 @@ def gpu_main(args) -> None:
             say("no CUDA GPU here (numba.cuda sees none): GPU sections skipped")
             report["skipped"] = "no CUDA GPU found by numba.cuda"
             return
-        with section("CUDA compile of the spinner kernel (one small paper batch on cuda)", 420):
+        with section("CUDA compile of the spinner and flight kernels (a small paper batch, 64 flights)", 420):
             from numba import cuda
 
             try:
@@ -607,16 +608,17 @@ def gpu_main(args) -> None:
         with section("GPU against CPU on one batch", 60):
             report["match"] = compare_devices(library, granules, toy)
             write_json(out / "gpu.json", report)
+        # in the order of what is least known: the GPU target's own figure (the vector env, now with workers and
+        # the flights on the GPU), the queue's schedule, the flights alone, then the spinner stage measured before
+        with section("the vector env and run_batch, cuda against cpu", args.batch_cap_s) as until:
+            whole_batches(Table(out / "gpu_batch.csv"), library, until, granules, toy, cores)
         spinner = Table(out / "gpu_spinner.csv")
-        with section("GPU schedules of the spinner kernel", 60) as until:  # first: the figure not yet measured
+        with section("GPU schedules of the spinner kernel", 60) as until:
             schedules(spinner, library, until, granules, toy, cores)
         with section("flights alone: GPU against CPU", 40) as until:
             flights(Table(out / "gpu_flight.csv"), until, toy, cores)
         with section("spinner stage alone: GPU, CPU 1 and 16 threads", args.spinner_cap_s) as until:
             spinner_stage(spinner, library, until, granules, toy, cores)
-        batch = Table(out / "gpu_batch.csv")
-        with section("run_batch and the vector env, cuda against cpu", args.batch_cap_s) as until:
-            whole_batches(batch, library, until, granules, toy, cores)
     finally:
         threads.set_threads(None)
         write_json(out / "gpu.json", report)
@@ -858,7 +860,7 @@ def whole_batches(table: Table, library, until: float, granules: Optional[int], 
     from spreadgym import device
     from spreadgym.spread.batch import run_batch
 
-    sizes = (2, 4) if toy else (256, 1024)
+    sizes = (4, 2) if toy else (1024, 256)  # the larger first: where a GPU should pay
     scenes = paper_designs(max(sizes), granules, seed0=5000)
     rewards: dict = {}
 
