@@ -590,7 +590,12 @@ def gpu_main(args) -> None:
             say(f"compiled and launched in {report['compile_and_first_launch_s']:.1f} s; "
                 f"again in {report['second_launch_s'] * 1e3:.1f} ms")
             started = time.perf_counter()
-            fly_parts(64, 1, "cuda")
+            try:
+                fly_parts(64, 1, "cuda")
+            except Exception as error:  # as the spinner's: the whole traceback; sections that fly on cuda then fail
+                report["flight_compile_error"] = f"{type(error).__name__}: {error}"[:4000]
+                print(traceback.format_exc()[-4000:], flush=True)
+                raise
             report["flight_compile_and_first_launch_s"] = time.perf_counter() - started
             say(f"flight kernel compiled and launched in {report['flight_compile_and_first_launch_s']:.1f} s")
     finally:

@@ -1,4 +1,4 @@
-"""Where the compiled spinner kernel runs: the CPU (default) or a CUDA GPU.
+"""Where the compiled spinner kernel (and a batch's flights) run: the CPU (default) or a CUDA GPU.
 
 The device is, first found: the one `using` holds on this thread (an environment's
 `device` keyword), what `set_device` was given (the CLI's `--device`), the environment
@@ -38,7 +38,7 @@ def set_device(name: Optional[str]) -> None:
 
 
 def current() -> str:
-    """The device a compiled spinner stage runs on now."""
+    """The device a compiled spinner stage (and a batch's flights) runs on now."""
     held = getattr(_held, "name", None)
     if held is not None:
         return held

@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+from typing import Optional
 
 import pytest
 
@@ -42,16 +43,63 @@ def _default_thread_count():
 @pytest.fixture
 def cuda_simulator():
     """Run a script in a fresh interpreter under numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1,
-    read when numba's CUDA target loads) and return the JSON it prints last."""
+    read when numba's CUDA target loads), with `args` and `env` added to its command line
+    and environment, and return the JSON it prints last (None where it prints none)."""
 
-    def _run(script: str) -> dict:
-        env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
-        env.pop("SPREADGYM_DEVICE", None)
-        done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=900, env=env)
+    def _run(script: str, args: tuple = (), env: Optional[dict] = None) -> Optional[dict]:
+        full = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1", **(env or {})}
+        full.pop("SPREADGYM_DEVICE", None)
+        done = subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, timeout=900,
+                              env=full)
         assert done.returncode == 0, done.stderr[-3000:]
-        return json.loads(done.stdout.strip().splitlines()[-1])
+        lines = done.stdout.strip().splitlines()
+        return json.loads(lines[-1]) if lines and lines[-1].startswith("{") else None
 
     return _run
+
+
+GPU_LAUNCH_LOGGER = """
+import os
+if os.environ.get("SPREADGYM_TEST_LAUNCH_LOG"):
+    from spreadgym.physics.compiled import cuda_spinner
+    from spreadgym.spread import cuda_flight
+
+    def _logged(module, name, kind):
+        call = getattr(module, name)
+
+        def logged(*args, **kwargs):
+            with open(os.environ["SPREADGYM_TEST_LAUNCH_LOG"], "a") as log:
+                log.write(f"{os.getpid()} {kind}\\n")
+            return call(*args, **kwargs)
+
+        setattr(module, name, logged)
+
+    _logged(cuda_spinner, "run_all", "spinner")
+    _logged(cuda_flight, "fly_all", "flight")
+"""
+
+
+@pytest.fixture
+def gpu_launch_log(tmp_path):
+    """(env, launches): `env` for a `cuda_simulator` script makes it and every process it
+    starts (spawned or forked workers included) log each GPU launch of the spinner and the
+    flight, through a sitecustomize on PYTHONPATH; `launches()` gives {kind: set of process
+    ids that launched it}."""
+    folder = tmp_path / "launch-logger"
+    folder.mkdir()
+    (folder / "sitecustomize.py").write_text(GPU_LAUNCH_LOGGER)
+    log = tmp_path / "launches.txt"
+    path = os.pathsep.join(p for p in (str(folder), os.environ.get("PYTHONPATH", "")) if p)
+    env = {"PYTHONPATH": path, "SPREADGYM_TEST_LAUNCH_LOG": str(log)}
+
+    def launches() -> dict:
+        found: dict = {}
+        for line in (log.read_text().splitlines() if log.exists() else []):
+            pid, kind = line.split()
+            found.setdefault(kind, set()).add(int(pid))
+        return found
+
+    return env, launches
 
 
 def _listening_sockets(root: int) -> list[tuple[str, int, str, bool]]:

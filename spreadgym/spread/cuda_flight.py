@@ -16,16 +16,17 @@ import numpy as np
 from numba import float64, int64
 
 from spreadgym.physics.compiled.cuda_target import cuda, host_array  # numba's CUDA target, loaded there
-from spreadgym.spread.flight_kernel import LANES, fly_range
+from spreadgym.spread.flight_kernel import (
+    LANES,
+    WORK_INTS,
+    WORK_LANES,
+    WORK_LIFTS,
+    WORK_STAGES,
+    WORK_VECTORS,
+    fly_range,
+)
 
 THREADS_PER_BLOCK = 64
-# the work arrays of `flight_kernel.lane_arrays`, as module constants (numba.cuda sizes
-# local arrays from constants only)
-VECTORS = (5, 3, LANES)
-STAGES = (2, 7, 3, LANES)
-LANE_ROWS = (7, LANES)
-LIFTS = (2, LANES)
-INTS = (3, LANES)
 
 
 @cuda.jit(cache=True)
@@ -37,11 +38,11 @@ def _fly_lanes(position, height, velocity, par, table, lift, wind_x, wind_y, g, 
     n = position.shape[0]
     if first >= n:
         return
-    vectors = cuda.local.array(VECTORS, float64)
-    stages = cuda.local.array(STAGES, float64)
-    lanes = cuda.local.array(LANE_ROWS, float64)
-    lf = cuda.local.array(LIFTS, float64)
-    ints = cuda.local.array(INTS, int64)
+    vectors = cuda.local.array(WORK_VECTORS, float64)
+    stages = cuda.local.array(WORK_STAGES, float64)
+    lanes = cuda.local.array(WORK_LANES, float64)
+    lf = cuda.local.array(WORK_LIFTS, float64)
+    ints = cuda.local.array(WORK_INTS, int64)
     lost = fly_range(first, min(first + LANES, n), host_array(position), host_array(height), host_array(velocity),
                      host_array(par), host_array(table), lift, wind_x, wind_y, g, dt, atol, rtol, host_array(out_xy),
                      host_array(out_t), vectors, stages, lanes, lf, ints)

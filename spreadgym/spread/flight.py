@@ -40,6 +40,7 @@ from typing import Optional
 import numpy as np
 
 from spreadgym.config.scene import Flight
+from spreadgym.device import DEVICES
 from spreadgym.errors import ConfigError
 from spreadgym.physics import magnus
 from spreadgym.physics.constants import GRAVITY_M_S2
@@ -165,8 +166,10 @@ def fly(
         par, table = k[None, :], np.empty((7, 0))
     ground_velocity = vel.copy()  # ground frame: the machine's forward speed added
     ground_velocity[:, 1] += flight.forward_speed_m_s
-    landing_xy = np.empty_like(pos)
+    landing_xy = np.empty((pos.shape[0], 2))
     landing_t = np.empty(pos.shape[0])
+    if device not in DEVICES:
+        raise ConfigError("device", f"unknown device {device!r}; allowed: {', '.join(DEVICES)}")
     if device == "cuda":
         from spreadgym.spread import cuda_flight  # numba's CUDA target: only when asked for
 

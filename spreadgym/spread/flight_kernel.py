@@ -30,6 +30,13 @@ MAX_STEPS = 1_000_000  # per granule
 _NEWTON_ITERATIONS = 50  # most landing iterations per granule
 LANES = 16  # granules flown side by side
 _EMPTY, _FREE, _LANDING = 0, 1, 2  # what a lane is doing
+# `fly_range`'s work arrays, their shapes module constants (numba.cuda sizes a GPU
+# thread's local arrays from constants only: spreadgym.spread.cuda_flight)
+WORK_VECTORS = (5, 3, LANES)  # position, velocity, first stage, new position, spin base
+WORK_STAGES = (2, 7, 3, LANES)  # the step's velocity and acceleration stages
+WORK_LANES = (7, LANES)  # time, step, full step, landing bracket (2), drag constant, 1/|omega|
+WORK_LIFTS = (2, LANES)  # lift parameters
+WORK_INTS = (3, LANES)  # step count, mode, granule
 
 # Dormand-Prince 5(4) tableau (FSAL: the 7th stage is the next step's first).
 _A = np.array([
@@ -198,10 +205,10 @@ def fly_all(position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
 
 @KERNEL
 def lane_arrays():
-    """The work arrays of `fly_range`'s LANES lanes (it zeroes them): vectors (5, 3, L),
-    stages (2, 7, 3, L), lanes (7, L), lf (2, L), ints (3, L) (int64)."""
-    return (np.empty((5, 3, LANES)), np.empty((2, 7, 3, LANES)), np.empty((7, LANES)), np.empty((2, LANES)),
-            np.empty((3, LANES), dtype=np.int64))
+    """The work arrays of `fly_range`'s lanes (it zeroes them): vectors, stages, lanes, lf
+    and ints (int64), of the WORK_* shapes."""
+    return (np.empty(WORK_VECTORS), np.empty(WORK_STAGES), np.empty(WORK_LANES), np.empty(WORK_LIFTS),
+            np.empty(WORK_INTS, dtype=np.int64))
 
 
 @INLINED
@@ -302,16 +309,17 @@ def _zero(vectors, stages, lanes, lf, ints):
     """Every work array of `fly_range` set to 0 (loops: a GPU thread's local arrays too)."""
     for q in range(LANES):
         for c in range(3):
-            for r in range(5):
+            for r in range(WORK_VECTORS[0]):
                 vectors[r, c, q] = 0.0
-            for m in range(7):
-                stages[0, m, c, q] = 0.0
-                stages[1, m, c, q] = 0.0
-            ints[c, q] = 0
-        for r in range(7):
+            for m in range(WORK_STAGES[1]):
+                for r in range(WORK_STAGES[0]):
+                    stages[r, m, c, q] = 0.0
+        for r in range(WORK_LANES[0]):
             lanes[r, q] = 0.0
-        lf[0, q] = 0.0
-        lf[1, q] = 0.0
+        for r in range(WORK_LIFTS[0]):
+            lf[r, q] = 0.0
+        for r in range(WORK_INTS[0]):
+            ints[r, q] = 0
 
 
 @INLINED

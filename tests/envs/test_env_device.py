@@ -28,13 +28,14 @@ def test_an_env_on_a_missing_gpu_fails_at_make_in_one_line():
     assert "\n" not in str(error.value)
 
 
-def test_workers_share_the_simulated_gpu_with_the_cpu_rewards(cuda_simulator):
+def test_workers_share_the_simulated_gpu_with_the_cpu_rewards(cuda_simulator, gpu_launch_log):
     """The vector env's worker processes may share a GPU: two workers on the simulated GPU
-    step as one process on the CPU (rewards and observations bit for bit), each worker
-    launching its own block's batch (a CUDA launch that fails makes this test fail)."""
+    step as one process on the CPU (rewards and observations bit for bit), and each worker
+    launches its own block's spinner and flights on the GPU (logged in the workers)."""
+    env, launches = gpu_launch_log
     found = cuda_simulator(
-        "import json, numpy as np, gymnasium as gym, spreadgym\n"
-        "out = {}\n"
+        "import json, os, numpy as np, gymnasium as gym, spreadgym\n"
+        "out = {'parent': os.getpid()}\n"
         "for dev, workers in (('cpu', 1), ('cuda', 2)):\n"
         "    venv = gym.make_vec('spreadgym/SpinnerDesign-v1', num_envs=3, workers=workers, granules=24, device=dev,\n"
         "                        autoreset_mode='same_step')\n"
@@ -43,6 +44,9 @@ def test_workers_share_the_simulated_gpu_with_the_cpu_rewards(cuda_simulator):
         "    obs, reward, *_ = venv.step(venv.action_space.sample())\n"
         "    out[dev] = {'obs': obs.tolist(), 'reward': reward.tolist()}\n"
         "    venv.close()\n"
-        "print(json.dumps(out))\n")
+        "print(json.dumps(out))\n", env=env)
     assert found["cuda"] == found["cpu"]
     assert len(set(found["cpu"]["reward"])) == 3  # three designs, three rewards: not a constant
+    launched = launches()
+    for kind in ("spinner", "flight"):
+        assert len(launched.get(kind, set())) == 2 and found["parent"] not in launched[kind], launched

@@ -4,9 +4,6 @@ the kernel's granule index, design index, copies in and out, against the CPU ker
 small batches; and the one-line errors where no GPU is found."""
 
 import json
-import os
-import subprocess
-import sys
 
 import pytest
 
@@ -136,22 +133,26 @@ def test_the_device_names_and_their_order(monkeypatch):
 
 
 COMPARED = """
-import json, sys
+import json, os, sys
 from spreadgym.cli.main import main
 for device, workers in (("cpu", "1"), ("cuda", "2")):
     main(["compare", "--device", device, "--workers", workers, "--budget", "2", "--methods", "random", "centre",
           "--granules", "24", "--fertilizers", "pellet", "--swaths", "2.9", "--force",
           "--out", sys.argv[1] + "/" + device])
+print(json.dumps({"parent": os.getpid()}))
 """
 
 
-def test_compare_workers_share_the_simulated_gpu_with_the_cpu_scores(tmp_path):
-    """--device cuda with two worker processes (each search launching on the same GPU)
-    scores as one process on the CPU: the same CV, reward and swath for every method."""
-    done = subprocess.run([sys.executable, "-c", COMPARED, str(tmp_path)], capture_output=True, text=True,
-                          timeout=900, env={**os.environ, "NUMBA_ENABLE_CUDASIM": "1"})
-    assert done.returncode == 0, done.stderr[-3000:]
+def test_compare_workers_share_the_simulated_gpu_with_the_cpu_scores(cuda_simulator, gpu_launch_log, tmp_path):
+    """--device cuda with two worker processes scores as one process on the CPU (the same
+    CV, reward and swath for every method), the searches' spinners and flights launched
+    on the GPU in the workers (logged there)."""
+    env, launches = gpu_launch_log
+    found = cuda_simulator(COMPARED, args=(str(tmp_path),), env=env)
     tables = [json.loads((tmp_path / device / "compare.json").read_text())["table"] for device in ("cpu", "cuda")]
     keys = ("method", "cv_percent", "reward", "effective_swath_m", "simulations")
     cpu, gpu = ([{k: row[k] for k in keys} for row in table] for table in tables)
     assert cpu == gpu and len(cpu) == 2
+    launched = launches()
+    for kind in ("spinner", "flight"):
+        assert launched.get(kind) and found["parent"] not in launched[kind], launched

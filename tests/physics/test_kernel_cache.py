@@ -36,7 +36,7 @@ def test_caches_go_when_a_called_kernel_changes_and_stay_otherwise(tmp_path):
 def test_every_kernel_source_is_watched():
     package = Path(spreadgym.__file__).parent
     compiling = {path.resolve() for path in package.rglob("*.py")
-                 if re.search(r"^@(KERNEL|PARALLEL|INLINED|njit)\b", path.read_text(), re.MULTILINE)}
+                 if re.search(r"^@(KERNEL|PARALLEL|INLINED|njit|cuda\.jit)\b", path.read_text(), re.MULTILINE)}
     assert len(compiling) > 10
     assert compiling <= {path.resolve() for path in KERNEL_SOURCES}
     assert all(path.is_file() for path in KERNEL_SOURCES)
