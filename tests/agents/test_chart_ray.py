@@ -3,6 +3,7 @@ chart, row for row, in this process and on a three-node cluster (one machine).""
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -54,6 +55,7 @@ def test_same_chart_in_process_and_on_a_three_node_cluster(tmp_path):
     spec = make_spec("paper", "compound-10-16-10,pellet", "3,4", **SMALL)[0]
     local = run_chart(spec, tmp_path / "local", engine="local", progress=False)
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    session = Path(cluster.head_node.get_session_dir_path())  # in Ray's temp folder: removed after, not left behind
     try:
         for _ in range(2):
             cluster.add_node(num_cpus=1)
@@ -62,6 +64,7 @@ def test_same_chart_in_process_and_on_a_three_node_cluster(tmp_path):
     finally:
         ray.shutdown()
         cluster.shutdown()
+        shutil.rmtree(session, ignore_errors=True)
     assert without_wall(remote.payload["rows"]) == without_wall(local.payload["rows"])
 
 
