@@ -961,6 +961,11 @@ def summary(out: Path) -> None:
         else:
             lines.append(f"GPU: {gpu.get('gpu')}, compile + first launch {num(gpu.get('compile_and_first_launch_s'))} s"
                          + (" (CUDA simulator)" if gpu.get("sim") else ""))
+            if "flight_compile_error" in gpu:
+                lines.append(f"  flight kernel: no compile ({gpu['flight_compile_error'][:300]})")
+            elif "flight_compile_and_first_launch_s" in gpu:
+                seconds = num(gpu["flight_compile_and_first_launch_s"])
+                lines.append(f"  flight kernel: compile + first launch {seconds} s")
             match = gpu.get("match", {}).get("summary")
             if match:
                 lines.append("  GPU vs CPU: " + ", ".join(f"{k}={v}" for k, v in match.items()))
