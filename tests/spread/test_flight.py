@@ -154,6 +154,9 @@ def test_bad_inputs_name_their_keys():
         fly(np.zeros((2, 2)), 1.0, np.zeros((2, 2)), 3e-3, 1500.0, Flight())
     with pytest.raises(ConfigError):
         fly(np.zeros((2, 2)), 1.0, np.zeros((2, 3)), 3e-3, 1500.0, Flight(), dt_s=0.0)
+    with pytest.raises(ConfigError, match="unknown device 'gpu'; allowed: cpu, cuda") as e:
+        fly(np.zeros((2, 2)), 1.0, np.zeros((2, 3)), 3e-3, 1500.0, Flight(), device="gpu")
+    assert e.value.key == "device"
 
 
 def scene_launches(m, seed):
