@@ -48,7 +48,7 @@ with zipfile.ZipFile(sys.argv[1]) as z:
   nvidia-smi -L 2>/dev/null || echo "nvidia-smi: none"
   # whether launches of different processes (the vector env's GPU workers) can overlap: only under NVIDIA's MPS
   nvidia-smi --query-gpu=compute_mode --format=csv,noheader 2>/dev/null | sed 's/^/compute mode: /'
-  if [ -S "${CUDA_MPS_PIPE_DIRECTORY:-/tmp/nvidia-mps}/control" ]; then echo "MPS: running"; else echo "MPS: not running"; fi
+  if pgrep -x nvidia-cuda-mps-control > /dev/null 2>&1; then echo "MPS: running"; else echo "MPS: not running"; fi
   echo "libnvvm: $(ls /usr/local/cuda*/nvvm/lib64/libnvvm.so* 2>/dev/null | head -2 | tr '\n' ' ')"
   timeout -k 15 "${LIMIT:-450}" $PY -P -m spreadgym.agents.device_check --out "$OUT" "$@"
   rc=$?
