@@ -26,7 +26,7 @@ from spreadgym.spread.flight_kernel import (
     fly_range,
 )
 
-THREADS_PER_BLOCK = 64
+THREADS_PER_BLOCK = 64  # as the spinner's launch (measured there, not for the flight)
 
 
 @cuda.jit(cache=True)

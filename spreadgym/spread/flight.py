@@ -151,6 +151,8 @@ def fly(
     lands as it does in the whole run. `device` "cuda": one GPU launch
     (spreadgym.spread.cuda_flight; the same arithmetic, up to the GPU's fused multiply-adds).
     """
+    if device not in DEVICES:
+        raise ConfigError("device", f"unknown device {device!r}; allowed: {', '.join(DEVICES)}")
     pos, height, vel, diameter, density, spin = _check_inputs(
         position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2, spin_rad_s
     )
@@ -168,8 +170,6 @@ def fly(
     ground_velocity[:, 1] += flight.forward_speed_m_s
     landing_xy = np.empty((pos.shape[0], 2))
     landing_t = np.empty(pos.shape[0])
-    if device not in DEVICES:
-        raise ConfigError("device", f"unknown device {device!r}; allowed: {', '.join(DEVICES)}")
     if device == "cuda":
         from spreadgym.spread import cuda_flight  # numba's CUDA target: only when asked for
 
