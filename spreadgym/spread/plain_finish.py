@@ -179,8 +179,9 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
             kinds.append(kind := (scene.flight, lift, []))
         kind[2].append(d)
     parts = []  # (flight, lift, granule rows: a slice or indices)
-    step = (max(owner.size, 1) if on == "cuda" else
-            int(np.clip(-(-owner.size // (PARTS_PER_THREAD * threads.thread_count())), SMALLEST_PART, PART_GRANULES)))
+    count = threads.thread_count()
+    step = (max(owner.size, 1) if on == "cuda" else PART_GRANULES if count == 1 else
+            int(np.clip(-(-owner.size // (PARTS_PER_THREAD * count)), SMALLEST_PART, PART_GRANULES)))
     for flight, lift, members in kinds:
         rows = np.flatnonzero(np.isin(owner, members)) if len(kinds) > 1 else None
         size = owner.size if rows is None else rows.size
