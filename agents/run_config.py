@@ -9,7 +9,12 @@ Run keys:
     algo             ppo | sac (optional; must match --algo)
     env              env id (spreadgym:SpinnerDesign-v0 or spreadgym:SpreaderTuning-v0)
     env_kwargs       gym.make keyword arguments (checked by the env: unknown keys fail)
-    n_envs           parallel envs: SubprocVecEnv when > 1, DummyVecEnv when 1
+    n_envs           parallel envs
+    vec_env          auto | batched | subproc: how the n_envs step (agents/training_env.py);
+                     auto: the batched vector env where the env has one (the SpinnerDesign
+                     tasks) and n_envs exceeds spreadgym's threads (or workers is set), else SubprocVecEnv
+                     (n_envs > 1) or DummyVecEnv; the same bits whichever steps them
+    workers          processes of the batched vector env (null: one per thread, at most n_envs)
     n_timesteps      total env steps of the run
     normalize        false | true | {norm_obs, norm_reward, clip_obs, clip_reward, gamma, epsilon}
     seed             seed of the model and the envs
@@ -34,7 +39,8 @@ from typing import Any, Literal, Optional
 
 from pydantic import Field, create_model, field_validator, model_validator
 
-from spreadgym.agents.evaluation import canonical_env_id
+from spreadgym import threads
+from spreadgym.agents.evaluation import canonical_env_id, is_tuning
 from spreadgym.config.base import Integer, Real, StrictModel, validate
 from spreadgym.config.resources import config_dir, read_yaml
 from spreadgym.errors import ConfigError, SpreadgymError
@@ -78,6 +84,8 @@ class RunConfig(StrictModel):
     env: str = DEFAULT_ENV
     env_kwargs: dict[str, Any] = Field(default_factory=dict)
     n_envs: Integer = Field(default=1, ge=1)
+    vec_env: Literal["auto", "batched", "subproc"] = "auto"
+    workers: Optional[Integer] = Field(default=None, ge=1)
     n_timesteps: Integer = Field(default=10_000, ge=1)
     normalize: Optional[Normalize] = None  # YAML: false (None), true ({}), or the keyword arguments
     seed: Integer = Field(default=0, ge=0)
@@ -86,14 +94,14 @@ class RunConfig(StrictModel):
     policy: str = "MlpPolicy"
     policy_kwargs: dict[str, Any] = Field(default_factory=dict)
 
-    @field_validator("env_kwargs", "policy_kwargs", "seed", "env", "policy", mode="before")
+    @field_validator("env_kwargs", "policy_kwargs", "seed", "env", "policy", "vec_env", mode="before")
     @classmethod
     def _null_is_default(cls, value, info):
         """YAML's `key:` (null) means the default."""
         if value is not None:
             return value
         return {"env_kwargs": {}, "policy_kwargs": {}, "seed": 0, "env": DEFAULT_ENV,
-                "policy": "MlpPolicy"}[info.field_name]
+                "policy": "MlpPolicy", "vec_env": "auto"}[info.field_name]
 
     @field_validator("normalize", mode="before")
     @classmethod
@@ -115,6 +123,34 @@ class RunConfig(StrictModel):
         if act is not None and act not in ACTIVATIONS:
             raise ValueError(f"activation_fn: unknown {act!r}; known: {', '.join(ACTIVATIONS)}")
         return value
+
+    @model_validator(mode="after")
+    def _vec_env(self) -> "RunConfig":
+        if self.vec_env == "batched" and is_tuning(self.env):
+            raise ValueError(f"vec_env: batched needs an env with a batched vector env (the SpinnerDesign tasks); "
+                             f"{self.env} has none: use auto or subproc")
+        if self.workers is not None and self.vec_env_kind != "batched":
+            why = "vec_env: subproc" if self.vec_env == "subproc" else f"{self.env} has none"
+            raise ValueError(f"workers: only the batched vector env has workers ({why})")
+        if self.workers is not None and self.workers > self.n_envs:
+            raise ValueError(f"workers: at most n_envs ({self.n_envs}), got {self.workers}")
+        return self
+
+    @property
+    def vec_env_kind(self) -> str:
+        """What steps the run's envs: "batched" (spreadgym's vector env in SB3's clothes),
+        "subproc" (SB3's SubprocVecEnv) or "dummy" (SB3's DummyVecEnv, one env in this
+        process). `auto` takes the batched env where its workers (one per thread) would
+        hold more than one env each, so that their batches pay: n_envs above spreadgym's
+        thread count (at one env per worker it tied or trailed SubprocVecEnv by up to 12 %
+        on two cores; docs/agents.md), or where `workers` is set. Both give the same bits."""
+        if self.vec_env == "auto":
+            wanted = self.workers is not None or self.n_envs > threads.thread_count()
+            batches = wanted and not is_tuning(self.env)
+            return "batched" if batches else "subproc" if self.n_envs > 1 else "dummy"
+        if self.vec_env == "batched":
+            return "batched"
+        return "subproc" if self.n_envs > 1 else "dummy"
 
     @model_validator(mode="after")
     def _schedules(self) -> "RunConfig":

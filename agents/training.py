@@ -239,7 +239,7 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
             _write_config(out_dir, cfg, model.num_timesteps, resumed_from, stopped, wall)
             log(f"checkpoint {final.model}")
         except WORKER_GONE:
-            if cfg.n_envs == 1:
+            if cfg.vec_env_kind != "subproc":  # only SubprocVecEnv's workers record their failures
                 raise
             raise worker_failure(error_dir) from None
         finally:

@@ -101,13 +101,16 @@ WORKER_GONE = (EOFError, BrokenPipeError, ConnectionResetError)  # what SubprocV
 
 
 def make_training_env(cfg: RunConfig, error_dir: Optional[str] = None):
-    """The vector env of the run: SubprocVecEnv for n_envs > 1 (workers record their
+    """The vector env of the run (`cfg.vec_env_kind`): spreadgym's batched vector env as an
+    SB3 VecEnv (`batched_env`), or SubprocVecEnv for n_envs > 1 (workers record their
     failures in `error_dir`; spreadgym's threads shared out among them, so that processes
     and threads do not multiply: one thread each where n_envs exceeds the threads), else
     DummyVecEnv."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
+    if cfg.vec_env_kind == "batched":
+        return batched_env(cfg)
     n = cfg.n_envs
     vec_cls = SubprocVecEnv if n > 1 else DummyVecEnv
     share = min(threads.shares(n)) if n > 1 else None  # the same for all: SB3 builds them from one factory
@@ -118,6 +121,24 @@ def make_training_env(cfg: RunConfig, error_dir: Optional[str] = None):
         if error_dir is None:
             raise
         raise worker_failure(error_dir) from None
+
+
+def batched_env(cfg: RunConfig):
+    """The SpinnerDesign vector env of `cfg.n_envs` sub-envs (`gym.make_vec`, same-step
+    autoreset) in `cfg.workers` processes (None: one per thread spreadgym may use, at most
+    n_envs), as an SB3 VecEnv seeded with `cfg.seed` (env i: seed + i, as make_vec_env
+    seeds SubprocVecEnv's) and its episodes recorded by VecMonitor (as Monitor records
+    them in each SubprocVecEnv worker)."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from spreadgym.agents.batched_vec_env import BatchedVecEnv
+
+    workers = cfg.workers if cfg.workers is not None else min(cfg.n_envs, threads.thread_count())
+    vector = gym.make_vec(cfg.env, num_envs=cfg.n_envs, autoreset_mode="same_step", workers=workers,
+                          **cfg.env_kwargs)
+    env = BatchedVecEnv(vector)
+    env.seed(cfg.seed)
+    return VecMonitor(env)
 
 
 # -- checkpoints ----------------------------------------------------------------------------

@@ -23,8 +23,10 @@ def test_a_recorded_bug_stays_a_bug_and_silence_is_said(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_worker_that_cannot_build_its_env_ends_train_with_its_message(tmp_path, monkeypatch, capsys):
-    """The parent's check passes; the scene file is gone before the two workers start."""
+@pytest.mark.parametrize("vec_env, said", [("subproc", "a training env worker stopped:"), ("batched", "scene")])
+def test_a_worker_that_cannot_build_its_env_ends_train_with_its_message(tmp_path, monkeypatch, capsys, vec_env, said):
+    """The parent's check passes; the scene file is gone before the two workers start
+    (SubprocVecEnv's, or the batched vector env's, whose errors reach the parent as they are)."""
     scene = tmp_path / "gone.yaml"
     scene.write_text((config_dir() / "scenes" / "paper.yaml").read_text(encoding="utf-8"), encoding="utf-8")
     original = training.check_env_kwargs
@@ -36,10 +38,10 @@ def test_a_worker_that_cannot_build_its_env_ends_train_with_its_message(tmp_path
 
     monkeypatch.setattr(training, "check_env_kwargs", check_then_remove)
     code = main(["train", "--algo", "ppo", "--timesteps", "64", "--set", "n_envs=2", "--set", "env_kwargs.granules=32",
-                 "--set", f"env_kwargs.scene={scene}", "--out", str(tmp_path / "run")])
+                 "--set", f"env_kwargs.scene={scene}", "--set", f"vec_env={vec_env}", "--out", str(tmp_path / "run")])
     err = capsys.readouterr().err
     assert code == 2, err
-    assert "a training env worker stopped:" in err and "gone.yaml" in err
+    assert said in err and "gone.yaml" in err
     assert "Traceback" not in err.splitlines()[-1]
 
 
@@ -56,8 +58,30 @@ def test_the_workers_share_the_threads_instead_of_each_taking_them_all(monkeypat
     monkeypatch.setenv(threads.ENV_VAR, "5")
     cfg = validate_config("ppo", read_config(default_config_path("ppo")), "shipped")
     for n, share in [(2, 2), (3, 1), (8, 1), (1, None)]:
-        training_env.make_training_env(cfg.replace(n_envs=n), "errors")
+        training_env.make_training_env(cfg.replace(n_envs=n, vec_env="subproc"), "errors")
         assert made[-1].args[2] == share
     env = training_env.worker_env("spreadgym/SpinnerDesign-v1", None, 2, granules=32)  # what a worker runs first
     assert threads.thread_count() == 2
     env.close()
+
+
+def test_the_batched_env_takes_one_worker_per_thread_at_most_n_envs(monkeypatch):
+    """The batched vector env's workers share spreadgym's threads among them (envs/shards.py):
+    one worker per thread by default, never more than n_envs, or as many as `workers` says."""
+    import gymnasium as gym
+
+    from spreadgym import threads
+    from spreadgym.agents.run_config import default_config_path, read_config, validate_config
+
+    asked, original = [], gym.make_vec
+
+    def make_vec(env_id, num_envs, **kwargs):
+        asked.append((num_envs, kwargs["workers"]))
+        return original(env_id, num_envs=num_envs, autoreset_mode="same_step", granules=32)
+
+    monkeypatch.setattr(gym, "make_vec", make_vec)
+    monkeypatch.setenv(threads.ENV_VAR, "5")
+    cfg = validate_config("ppo", read_config(default_config_path("ppo")), "shipped")
+    for change in ({"n_envs": 2, "vec_env": "batched"}, {"n_envs": 8}, {"n_envs": 8, "workers": 2}):
+        training_env.make_training_env(cfg.replace(**change), "errors").close()
+    assert asked == [(2, 2), (8, 5), (8, 2)]

@@ -1,0 +1,171 @@
+"""`train`'s batched vector env (agents/batched_vec_env.py) against SB3's own SubprocVecEnv:
+the same observations, rewards, ends, infos and trained policy, bit for bit."""
+
+from functools import partial
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+from spreadgym.agents.batched_vec_env import BatchedVecEnv, env_infos
+from spreadgym.agents.run_config import default_config_path, read_config, validate_config
+from spreadgym.agents.training_env import worker_env
+from spreadgym.errors import ConfigError
+
+DESIGN = "spreadgym/SpinnerDesign-v1"
+TUNING = "spreadgym/SpreaderTuning-v1"
+
+
+def assert_same(a, b, where="info"):
+    """Equal values (numpy scalars equal to Python ones), arrays equal to the bit, dicts key for key."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and list(a) == list(b), f"{where}: keys {list(a)} != {list(b)}"
+        for key in a:
+            assert_same(a[key], b[key], f"{where}.{key}")
+    elif isinstance(a, (np.ndarray, list, tuple)):
+        assert np.array_equal(np.asarray(a), np.asarray(b)), f"{where}: {a!r} != {b!r}"
+    elif isinstance(a, float):
+        assert np.float64(a).tobytes() == np.float64(b).tobytes(), f"{where}: {a!r} != {b!r}"
+    else:
+        assert a == b, f"{where}: {a!r} != {b!r}"
+
+
+def step_both(ours, theirs, steps: int, seed: int = 0):
+    """Step both VecEnvs with the same random actions; compare everything SB3 reads (the
+    rewards as `theirs` types them: SubprocVecEnv float64, DummyVecEnv float32)."""
+    assert np.array_equal(ours.reset(), theirs.reset())
+    for i, (a, b) in enumerate(zip(ours.reset_infos, theirs.reset_infos)):
+        assert_same(b, a, f"reset_infos[{i}]")
+    rng = np.random.default_rng(seed)
+    ends = cut = 0
+    for _ in range(steps):
+        actions = rng.uniform(-1, 1, (ours.num_envs, *ours.action_space.shape)).astype(np.float32)
+        obs_a, rew_a, done_a, info_a = ours.step(actions)
+        obs_b, rew_b, done_b, info_b = theirs.step(actions)
+        assert np.array_equal(obs_a, obs_b) and obs_a.dtype == obs_b.dtype
+        assert rew_a.dtype == np.float64 and rew_a.astype(rew_b.dtype).tobytes() == rew_b.tobytes()
+        assert np.array_equal(done_a, done_b)
+        for i, (a, b) in enumerate(zip(info_a, info_b)):
+            b = {key: value for key, value in b.items() if key != "episode"}  # Monitor's, timed: VecMonitor's below
+            assert_same(b, a, f"infos[{i}]")
+        ends += int(done_a.sum())
+        cut += sum(info["TimeLimit.truncated"] for info in info_a)
+    return ends, cut
+
+
+def test_the_design_tasks_step_as_in_subprocvecenv_workers():
+    """Three envs in two worker processes against SubprocVecEnv's three: every step ends
+    an episode, so every step checks terminal_observation and the reset in the same step."""
+    kwargs = {"granules": 32}
+    theirs = make_vec_env(partial(worker_env, DESIGN, None, 1), n_envs=3, seed=5, env_kwargs=kwargs,
+                          vec_env_cls=SubprocVecEnv)
+    ours = BatchedVecEnv(gym.make_vec(DESIGN, num_envs=3, autoreset_mode="same_step", workers=2, **kwargs))
+    ours.seed(5)
+    try:
+        assert step_both(ours, theirs, steps=3) == (9, 0)
+    finally:
+        ours.close()
+        theirs.close()
+
+
+def test_truncated_episodes_keep_their_last_observation_and_say_so():
+    """SpreaderTuning's episodes end by the time limit (truncated, not terminated): the
+    adapter over gymnasium's own sync vector env against DummyVecEnv of the same env."""
+    kwargs = {"granules": 32, "max_steps": 2, "max_episode_steps": 2}
+    theirs = make_vec_env(partial(worker_env, TUNING, None, None), n_envs=2, seed=3, env_kwargs=kwargs,
+                          vec_env_cls=DummyVecEnv)
+    ours = BatchedVecEnv(gym.make_vec(TUNING, num_envs=2, vectorization_mode="sync",
+                                      vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kwargs))
+    ours.seed(3)
+    try:
+        ends, cut = step_both(ours, theirs, steps=5)
+        assert ends > cut > 0  # episodes ended both ways
+    finally:
+        ours.close()
+        theirs.close()
+
+
+def test_gymnasium_infos_go_back_to_one_dict_per_env():
+    infos = {"a": np.array([1.0, 0.0]), "_a": np.array([True, False]),
+             "nested": {"b": np.array([0, 7]), "_b": np.array([False, True])},
+             "_nested": np.array([True, True])}
+    assert env_infos(infos, 2) == [{"a": 1.0, "nested": {}}, {"nested": {"b": 7}}]
+
+
+def test_what_the_adapter_cannot_do_is_said():
+    vector = gym.make_vec(DESIGN, num_envs=2, autoreset_mode="next_step", granules=32)
+    with pytest.raises(ValueError, match="same_step"):
+        BatchedVecEnv(vector)
+    vector.close()
+    env = BatchedVecEnv(gym.make_vec(DESIGN, num_envs=2, autoreset_mode="same_step", granules=32))
+    assert env.get_attr("render_mode") == [None, None] and env.env_is_wrapped(gym.Wrapper) == [False, False]
+    with pytest.raises(AttributeError, match="'reset'.*vec_env: subproc"):
+        env.env_method("reset")
+    with pytest.raises(AttributeError, match="'x'.*vec_env: subproc"):
+        env.set_attr("x", 1)
+    env.set_options([{"a": 1}, {}])
+    with pytest.raises(ValueError, match="same options"):
+        env.reset()
+    env.close()
+
+
+@pytest.mark.parametrize("change, kind", [
+    ({"n_envs": 3}, "batched"), ({"n_envs": 2}, "subproc"), ({"n_envs": 1}, "dummy"),
+    ({"n_envs": 1, "vec_env": "batched"}, "batched"), ({"n_envs": 2, "vec_env": "batched"}, "batched"),
+    ({"n_envs": 3, "vec_env": "subproc"}, "subproc"), ({"n_envs": 1, "vec_env": "subproc"}, "dummy"),
+    ({"n_envs": 3, "env": TUNING}, "subproc"), ({"n_envs": 3, "vec_env": None}, "batched"),
+    ({"n_envs": 2, "workers": 1}, "batched"), ({"n_envs": 1, "workers": 1}, "batched"),
+])
+def test_auto_takes_the_batched_env_where_its_workers_would_batch(change, kind, monkeypatch):
+    """Two threads: the batched env's two workers batch from three envs on."""
+    from spreadgym import threads
+
+    monkeypatch.setenv(threads.ENV_VAR, "2")
+    raw = read_config(default_config_path("ppo"))
+    assert validate_config("ppo", {**raw, **change}, "x").vec_env_kind == kind
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"vec_env": "batched", "env": TUNING}, "vec_env: batched needs an env with a batched vector env"),
+    ({"vec_env": "subproc", "workers": 2}, "workers: only the batched vector env has workers (vec_env: subproc)"),
+    ({"n_envs": 64, "env": TUNING, "workers": 1}, "workers: only the batched vector env has workers (spreadgym:"),
+    ({"n_envs": 2, "workers": 3}, "workers: at most n_envs (2), got 3"),
+    ({"workers": 0}, "workers: Input should be greater than or equal to 1"),
+    ({"vec_env": "ray"}, "vec_env: Input should be 'auto', 'batched' or 'subproc'"),
+])
+def test_bad_vec_env_keys_are_one_line_errors(change, message):
+    raw = read_config(default_config_path("ppo"))
+    with pytest.raises(ConfigError) as err:
+        validate_config("ppo", {**raw, **change}, "x")
+    assert str(err.value).startswith(message) and "\n" not in str(err.value)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("normalize", [False, True])
+def test_training_on_the_batched_env_gives_subprocvecenvs_policy_to_the_bit(tmp_path, normalize):
+    """PPO for 48 steps of 3 envs: the policy's parameters (and VecNormalize's statistics)
+    equal, whichever vector env stepped the envs."""
+    import pickle
+
+    from stable_baselines3 import PPO
+
+    from spreadgym.agents.training import train
+
+    params, stats = {}, {}
+    for kind in ("subproc", "batched"):
+        out = tmp_path / kind
+        train("ppo", out, overrides={"n_envs": 3, "vec_env": kind, "env_kwargs.granules": 32, "n_steps": 8,
+                                     "batch_size": 8, "n_epochs": 2, "checkpoint_freq": 1000,
+                                     "normalize": normalize}, timesteps=48, log=lambda message: None)
+        params[kind] = PPO.load(out / "model.zip").policy.state_dict()
+        if normalize:
+            saved = pickle.loads((out / "vecnormalize.pkl").read_bytes())
+            stats[kind] = (saved.obs_rms.mean, saved.obs_rms.var, saved.ret_rms.mean, saved.ret_rms.var)
+    assert list(params["subproc"]) == list(params["batched"])
+    for key, value in params["subproc"].items():
+        assert np.array_equal(value.numpy(), params["batched"][key].numpy()), key
+    for a, b in zip(stats.get("subproc", ()), stats.get("batched", ())):
+        assert np.array_equal(a, b)
