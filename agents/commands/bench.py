@@ -9,6 +9,7 @@ import argparse
 import csv
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 from spreadgym.cli import arguments
@@ -311,7 +312,8 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
     on paper, field and twin-field scenes of mixed settings. Each figure is the median of
     `repeats` blocks of `batch` designs, with the blocks' range; the series' blocks are
     interleaved so that a shared machine's load falls on all of them alike. Ratios are to
-    the one-by-one figure at one thread."""
+    each group's first row: the one-by-one figure at one thread, and for `train`'s envs
+    (`training_env_rows`) SubprocVecEnv at the shipped config's 2 envs."""
     import gymnasium as gym
 
     from spreadgym import threads
@@ -349,12 +351,58 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
     venv.close()
     env.close()
     core = batch_series(batch, repeats)
-    users = batch_user_rows(batch, repeats)
+    users = batch_user_rows(batch, repeats) + [training_env_rows(repeats=repeats)]
     for group in [rows, core, *users]:
         base = group[0]["designs_per_s"]  # one by one at one thread
         for row in group:
             row["ratio_to_one_by_one_at_1_thread"] = row["designs_per_s"] / base
     return rows + core + [row for group in users for row in group]
+
+
+def training_env_rows(designs: int = 64, repeats: int = 5, counts: tuple = (2, 8)) -> list[dict]:
+    """`spreadgym train`'s envs (the shipped PPO config: SpinnerDesign-v0, 1000 granules) as
+    SB3's SubprocVecEnv (one process per env, threads shared out) and as the batched vector
+    env (`vec_env: batched`, one worker per thread), at each of `counts` envs: designs per
+    second over blocks of `designs` env steps, median of `repeats` interleaved blocks and
+    their range. Every series steps the same seeded actions; the last rewards of the two
+    kinds at each count are checked equal. The first row (SubprocVecEnv, `counts[0]` envs,
+    the shipped config's n_envs) is the group's base."""
+    import numpy as np
+
+    from spreadgym import threads
+    from spreadgym.agents.run_config import default_config_path, read_config, validate_config
+    from spreadgym.agents.training_env import make_training_env
+    from spreadgym.studies.benchmarks import interleaved_rates
+
+    shipped = validate_config("ppo", read_config(default_config_path("ppo")), "shipped")
+    everything = threads.thread_count()
+    names = {"subproc": "SubprocVecEnv", "batched": "batched vector env"}
+    envs, series = [], {}
+    try:
+        with tempfile.TemporaryDirectory(prefix="spreadgym-bench-") as errors:
+            for n in counts:
+                for kind in ("subproc", "batched"):
+                    env = make_training_env(shipped.replace(n_envs=n, vec_env=kind), errors)
+                    envs.append(env)
+                    env.reset()
+                    actions = np.random.default_rng(n)
+
+                    def block(env=env, n=n, actions=actions):
+                        shape = (n, *env.action_space.shape)
+                        for _ in range(-(-designs // n)):
+                            rewards = env.step(actions.uniform(-1, 1, shape).astype(np.float32))[1]
+                        return rewards
+
+                    series[(f"train env, {names[kind]}, {n} envs", n, everything)] = block
+            rows, found = interleaved_rates(series, designs, repeats)
+    finally:
+        for env in envs:
+            env.close()
+    values = list(found.values())
+    for subproc, batched in zip(values[::2], values[1::2]):
+        if not np.array_equal(subproc, batched):
+            raise AssertionError("train env: the batched vector env's rewards differ from SubprocVecEnv's")
+    return rows
 
 
 def batch_user_rows(runs: int = 64, repeats: int = 5) -> list[list[dict]]:
