@@ -315,6 +315,14 @@ def _learn(model, cfg, total, ckpt_dir, log) -> str:
     try:
         model.learn(total_timesteps=total - model.num_timesteps, callback=CallbackList([periodic, progress]),
                     reset_num_timesteps=False, tb_log_name=cfg.algo, progress_bar=False)
+    except Exception as error:  # noqa: BLE001 (re-raised unless a stop signal came first)
+        if not flags.get("signal"):
+            raise
+        # SIGTERM to the whole process group (`timeout`, a service manager) also stops the
+        # batched env's workers, which leave only Ctrl-C to the trainer: the step in flight
+        # is lost, as a stop between steps loses the rollout's unlearned steps; the model is whole
+        log(f"the envs stopped with the signal ({type(error).__name__}: {' '.join(str(error).split())}); "
+            "saving the model as it was")
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)

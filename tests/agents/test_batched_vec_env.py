@@ -169,3 +169,34 @@ def test_training_on_the_batched_env_gives_subprocvecenvs_policy_to_the_bit(tmp_
         assert np.array_equal(value.numpy(), params["batched"][key].numpy()), key
     for a, b in zip(stats.get("subproc", ()), stats.get("batched", ())):
         assert np.array_equal(a, b)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("vec_env", ["batched", "subproc"])
+def test_a_stop_signal_to_the_whole_process_group_still_saves_the_model(tmp_path, vec_env):
+    """`timeout` and service managers send SIGTERM to the trainer's whole process group;
+    the batched env's workers then stop with it (they leave only Ctrl-C to the trainer;
+    SubprocVecEnv's ignore both), and the trainer saves the model as it was and exits 130."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "spreadgym.cli.main", "train", "--algo", "ppo", "--timesteps", "100000",
+               "--set", "n_envs=4", "--set", f"vec_env={vec_env}", "--set", "env_kwargs.granules=32",
+               "--set", "n_steps=8", "--set", "batch_size=8", "--out", str(out)]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list((out / "tb").glob("*/*")) and time.monotonic() < deadline and process.poll() is None:
+            time.sleep(0.2)  # the model exists and learn() has opened its log: steps are being taken
+        time.sleep(2.0)
+        os.killpg(process.pid, signal.SIGTERM)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 130, err
+    assert (out / "model.zip").is_file() and "Traceback" not in err, err
