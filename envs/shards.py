@@ -113,8 +113,14 @@ class Shards:
             self._owed.discard(w)
 
     def close(self) -> None:
-        """Stop every worker (closing their sub-envs), waiting _CLOSE_WAIT_S at most."""
-        for pipe in self._pipes:
+        """Stop every worker (closing their sub-envs), waiting _CLOSE_WAIT_S at most. A
+        worker that still owes the answer to an interrupted call (a second Ctrl-C) gets its
+        pipe closed instead: one blocked sending a large answer then stops at once, rather
+        than after the wait."""
+        for w, pipe in enumerate(self._pipes):
+            if w in self._owed:
+                pipe.close()  # its send fails, or its next receive ends: `_serve` returns
+                continue
             try:
                 pipe.send(("close", ()))
             except OSError:
@@ -126,7 +132,7 @@ class Shards:
                 process.join()
         for pipe in self._pipes:
             pipe.close()
-        self._pipes, self._processes = [], []
+        self._pipes, self._processes, self._owed = [], [], set()
 
 
 def _serve(pipe: Connection, make, num_envs: int, share: int, device_name: str, kwargs: dict) -> None:

@@ -323,3 +323,38 @@ def test_an_answer_that_does_not_unpickle_is_that_workers_error_and_the_pipes_st
         assert workers.call("setup", [(), ()]) == [(1, 1, "cpu", True)] * 2  # each its own answer, no hang
     finally:
         workers.close()
+
+
+def test_close_after_an_abandoned_call_does_not_wait_for_its_answers():
+    """A second Ctrl-C abandons a call whose answers (here two frames of about a megabyte)
+    are larger than a pipe holds: the workers block sending them, so close() closes their
+    pipes rather than waiting _CLOSE_WAIT_S (10 s) for each."""
+    import time
+
+    from spreadgym.envs import shards
+
+    venv = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", render_mode="rgb_array", workers=2, **SMALL)
+    venv.reset(seed=1)
+    venv.step(np.array([[0.3, -0.2], [-0.6, 0.1]], dtype=np.float32))
+    frames = venv.render()
+    assert min(frame.nbytes for frame in frames) > 500_000
+    shards_ = venv.unwrapped._shards
+    pipe = shards_._pipes[0]
+    real = type(pipe).recv_bytes
+
+    def interrupted(self):
+        if self is pipe:
+            raise KeyboardInterrupt
+        return real(self)
+
+    type(pipe).recv_bytes = interrupted
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            venv.render()  # abandoned: both workers owe their frames
+    finally:
+        type(pipe).recv_bytes = real
+    processes = list(shards_._processes)
+    start = time.monotonic()
+    venv.close()
+    assert time.monotonic() - start < shards._CLOSE_WAIT_S / 2
+    assert not any(process.is_alive() for process in processes)
