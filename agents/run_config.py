@@ -12,8 +12,8 @@ Run keys:
     n_envs           parallel envs
     vec_env          auto | batched | subproc: how the n_envs step (agents/training_env.py);
                      auto: the batched vector env where the env has one (the SpinnerDesign
-                     tasks) and n_envs exceeds spreadgym's threads (or workers is set), else SubprocVecEnv
-                     (n_envs > 1) or DummyVecEnv; the same bits whichever steps them
+                     tasks) and n_envs > 1 (or workers is set), else SubprocVecEnv (n_envs > 1)
+                     or DummyVecEnv; what SB3 trains on is the same whichever steps them
     workers          processes of the batched vector env (null: one per thread, at most n_envs)
     n_timesteps      total env steps of the run
     normalize        false | true | {norm_obs, norm_reward, clip_obs, clip_reward, gamma, epsilon}
@@ -39,7 +39,6 @@ from typing import Any, Literal, Optional
 
 from pydantic import Field, create_model, field_validator, model_validator
 
-from spreadgym import threads
 from spreadgym.agents.evaluation import canonical_env_id, is_tuning
 from spreadgym.config.base import Integer, Real, StrictModel, validate
 from spreadgym.config.resources import config_dir, read_yaml
@@ -130,7 +129,7 @@ class RunConfig(StrictModel):
             raise ValueError(f"vec_env: batched needs an env with a batched vector env (the SpinnerDesign tasks); "
                              f"{self.env} has none: use auto or subproc")
         if self.workers is not None and self.vec_env_kind != "batched":
-            why = "vec_env: subproc" if self.vec_env == "subproc" else f"{self.env} has none"
+            why = "vec_env: subproc" if self.vec_env == "subproc" else f"{self.env} has no batched vector env"
             raise ValueError(f"workers: only the batched vector env has workers ({why})")
         if self.workers is not None and self.workers > self.n_envs:
             raise ValueError(f"workers: at most n_envs ({self.n_envs}), got {self.workers}")
@@ -140,13 +139,11 @@ class RunConfig(StrictModel):
     def vec_env_kind(self) -> str:
         """What steps the run's envs: "batched" (spreadgym's vector env in SB3's clothes),
         "subproc" (SB3's SubprocVecEnv) or "dummy" (SB3's DummyVecEnv, one env in this
-        process). `auto` takes the batched env where its workers (one per thread) would
-        hold more than one env each, so that their batches pay: n_envs above spreadgym's
-        thread count (at one env per worker it tied or trailed SubprocVecEnv by up to 12 %
-        on two cores; docs/agents.md), or where `workers` is set. Both give the same bits."""
+        process). `auto` takes the batched env wherever the env has one and n_envs > 1 (or
+        `workers` is set): on two cores it tied SubprocVecEnv at one env per worker and led
+        from two per worker on (docs/agents.md). What SB3 trains on is the same either way."""
         if self.vec_env == "auto":
-            wanted = self.workers is not None or self.n_envs > threads.thread_count()
-            batches = wanted and not is_tuning(self.env)
+            batches = (self.workers is not None or self.n_envs > 1) and not is_tuning(self.env)
             return "batched" if batches else "subproc" if self.n_envs > 1 else "dummy"
         if self.vec_env == "batched":
             return "batched"

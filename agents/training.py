@@ -35,6 +35,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
+from spreadgym import threads
 from spreadgym.agents.run_config import (
     ALGOS,
     RunConfig,
@@ -178,6 +179,10 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
                                         ("--seed", seed)) if v]
         if ignored:
             log(f"resuming: {', '.join(ignored)} ignored, the run keeps {out_dir / 'config.yaml'}")
+        if cfg.workers is not None and cfg.workers > threads.thread_count():  # resumed on a smaller machine
+            log(f"resuming: workers {cfg.workers} is more than the {threads.thread_count()} threads spreadgym may "
+                f"use here; using {threads.thread_count()} (what is trained on does not depend on it)")
+            cfg = cfg.replace(workers=threads.thread_count())
     else:
         path = Path(config_path) if config_path else default_config_path(algo)
         raw = read_config(path)

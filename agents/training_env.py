@@ -1,6 +1,8 @@
 """The training run's vector env: its worker processes, and what they say when they fail.
 
-`n_envs > 1` runs SubprocVecEnv workers (one `gym.make` per process); a worker that
+The run's `vec_env` decides what steps its envs (`RunConfig.vec_env_kind`): the SpinnerDesign
+tasks' batched vector env as an SB3 VecEnv (`batched_env`; its workers' errors reach the
+trainer as they are), or SubprocVecEnv workers (one `gym.make` per process): a worker that
 raises records its exception's one-line message in a folder the trainer gives it and
 ends quietly, so the trainer can end the command with that message
 (`worker_failure`) instead of a bare EOFError from the broken pipe.

@@ -115,6 +115,18 @@ class SpinnerDesignVectorEnv(VectorEnv):
         """Reset the sub-envs: every one, or those of `options["reset_mask"]` (a bool array of
         num_envs entries; the others keep their observations). An int seed s seeds sub-env i
         with s + i; a list gives each sub-env its own (None: unseeded)."""
+        observations, each = self.reset_each(seed=seed, options=options)
+        infos: dict = {}
+        for i, info in enumerate(each):
+            if info is not None:
+                infos = self._add_info(infos, info, i)
+        return observations, infos
+
+    def reset_each(self, *, seed: int | list[int | None] | None = None,
+                   options: Optional[dict] = None) -> tuple[np.ndarray, list[Optional[dict]]]:
+        """`reset` with each sub-env's info as its own dict (None for one the mask left
+        alone) instead of gymnasium's stacked infos, which turn Python numbers into numpy
+        scalars and a None among numbers into NaN (spreadgym.agents.batched_vec_env)."""
         seeds = self._seeds(seed)
         options = dict(options) if options else {}
         mask = self._reset_mask(options.pop("reset_mask")) if "reset_mask" in options else None
@@ -122,14 +134,14 @@ class SpinnerDesignVectorEnv(VectorEnv):
             check_reset_options(options)  # here, so that a bad option resets nothing (in one process or in workers)
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))  # the vector env's own np_random, as gymnasium's
-        infos: dict = {}
+        each: list[Optional[dict]] = [None] * self.num_envs
         for i, observation, info in self._reset_records(seeds, options, mask):
             self._observations[i] = observation
-            infos = self._add_info(infos, info, i)
+            each[i] = info
         reset = np.ones(self.num_envs, dtype=bool) if mask is None else mask
         self._autoreset[reset] = False
         self._ended[reset] = False
-        return self._observations.copy(), infos
+        return self._observations.copy(), each
 
     def _reset_records(self, seeds: list, options: dict, mask: Optional[np.ndarray]) -> list[tuple]:
         """(i, observation, info) of each sub-env reset (all, or those of `mask`), in order."""
@@ -167,6 +179,19 @@ class SpinnerDesignVectorEnv(VectorEnv):
         return mask
 
     def step(self, actions):
+        observations, rewards, terminated, truncated, each, finals = self.step_each(actions)
+        infos: dict = {}
+        for i, (info, final) in enumerate(zip(each, finals)):
+            if final is not None:
+                infos = self._add_info(infos, {"final_obs": final[0], "final_info": final[1]}, i)
+            infos = self._add_info(infos, info, i)
+        return observations, rewards, terminated, truncated, infos
+
+    def step_each(self, actions) -> tuple:
+        """`step` with each sub-env's info as its own dict instead of gymnasium's stacked
+        infos (see `reset_each`): (observations, rewards, terminated, truncated, infos,
+        finals), finals[i] the (observation, info) that ended sub-env i's episode in
+        same_step mode (its infos[i] is then the reset's), else None."""
         actions = np.asarray(actions)
         if actions.shape[:1] != (self.num_envs,):
             raise ValueError(f"actions must have {self.num_envs} rows (one per sub-env), got shape {actions.shape}")
@@ -179,18 +204,17 @@ class SpinnerDesignVectorEnv(VectorEnv):
         rewards = np.zeros(self.num_envs, dtype=np.float64)
         terminated = np.zeros(self.num_envs, dtype=bool)
         truncated = np.zeros(self.num_envs, dtype=bool)
-        infos: dict = {}
+        each: list = [None] * self.num_envs
+        finals: list = [None] * self.num_envs
         for i, obs, reward, ended, cut, info, final in self._step_records(actions, self._autoreset):
             rewards[i], terminated[i], truncated[i] = reward, ended, cut
-            if final is not None:
-                infos = self._add_info(infos, {"final_obs": final[0], "final_info": final[1]}, i)
             self._observations[i] = obs
-            infos = self._add_info(infos, info, i)
+            each[i], finals[i] = info, final
         if mode is AutoresetMode.NEXT_STEP:
             self._autoreset = terminated | truncated
         elif mode is AutoresetMode.DISABLED:
             self._ended = terminated | truncated
-        return self._observations.copy(), rewards, terminated, truncated, infos
+        return self._observations.copy(), rewards, terminated, truncated, each, finals
 
     def _step_records(self, actions: np.ndarray, autoreset: np.ndarray) -> list[tuple]:
         """(i, observation, reward, terminated, truncated, info, final) of every sub-env:

@@ -37,6 +37,7 @@ def step_both(ours, theirs, steps: int, seed: int = 0):
     """Step both VecEnvs with the same random actions; compare everything SB3 reads (the
     rewards as `theirs` types them: SubprocVecEnv float64, DummyVecEnv float32)."""
     assert np.array_equal(ours.reset(), theirs.reset())
+    assert ours._seeds == [None] * ours.num_envs and ours._options == [{}] * ours.num_envs  # used once
     for i, (a, b) in enumerate(zip(ours.reset_infos, theirs.reset_infos)):
         assert_same(b, a, f"reset_infos[{i}]")
     rng = np.random.default_rng(seed)
@@ -49,8 +50,10 @@ def step_both(ours, theirs, steps: int, seed: int = 0):
         assert rew_a.dtype == np.float64 and rew_a.astype(rew_b.dtype).tobytes() == rew_b.tobytes()
         assert np.array_equal(done_a, done_b)
         for i, (a, b) in enumerate(zip(info_a, info_b)):
-            b = {key: value for key, value in b.items() if key != "episode"}  # Monitor's, timed: VecMonitor's below
+            b = {key: value for key, value in b.items() if key != "episode"}  # Monitor's (timed); no VecMonitor here
             assert_same(b, a, f"infos[{i}]")
+        for i, (a, b) in enumerate(zip(ours.reset_infos, theirs.reset_infos)):
+            assert_same(b, a, f"reset_infos[{i}] after a step")
         ends += int(done_a.sum())
         cut += sum(info["TimeLimit.truncated"] for info in info_a)
     return ends, cut
@@ -66,6 +69,23 @@ def test_the_design_tasks_step_as_in_subprocvecenv_workers():
     ours.seed(5)
     try:
         assert step_both(ours, theirs, steps=3) == (9, 0)
+    finally:
+        ours.close()
+        theirs.close()
+
+
+def test_a_vector_env_without_step_each_is_unstacked_alike():
+    """The adapter's path for other gymnasium vector envs (stacked infos taken apart) on the
+    design task, against the same vector env's own per-env records."""
+    kwargs = {"granules": 32}
+    ours = BatchedVecEnv(gym.make_vec(DESIGN, num_envs=3, autoreset_mode="same_step", **kwargs))
+    plain = gym.make_vec(DESIGN, num_envs=3, autoreset_mode="same_step", **kwargs)
+    theirs = BatchedVecEnv(gym.vector.VectorWrapper(plain))  # a wrapper hides step_each: stacked infos
+    assert ours._each and not theirs._each
+    for env in (ours, theirs):
+        env.seed(4)
+    try:
+        assert step_both(ours, theirs, steps=2) == (6, 0)
     finally:
         ours.close()
         theirs.close()
@@ -106,24 +126,37 @@ def test_what_the_adapter_cannot_do_is_said():
         env.env_method("reset")
     with pytest.raises(AttributeError, match="'x'.*vec_env: subproc"):
         env.set_attr("x", 1)
+    assert env.get_attr("action_space")[0] == env.action_space  # one env's space, as SB3 reads it
+    with pytest.raises(RuntimeError, match="without step_async"):
+        env.step_wait()
     env.set_options([{"a": 1}, {}])
     with pytest.raises(ValueError, match="same options"):
         env.reset()
     env.close()
 
 
+def test_train_records_episodes_with_vecmonitor():
+    from spreadgym.agents.training_env import make_training_env
+
+    cfg = validate_config("ppo", {**read_config(default_config_path("ppo")), "n_envs": 2,
+                                  "env_kwargs": {"granules": 32}}, "x")
+    env = make_training_env(cfg, "errors")
+    try:
+        assert cfg.vec_env_kind == "batched"
+        env.reset()
+        _, rewards, _, infos = env.step(np.zeros((2, *env.action_space.shape), dtype=np.float32))
+        assert [info["episode"]["r"] for info in infos] == pytest.approx(rewards.tolist(), rel=1e-6)
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("change, kind", [
-    ({"n_envs": 3}, "batched"), ({"n_envs": 2}, "subproc"), ({"n_envs": 1}, "dummy"),
-    ({"n_envs": 1, "vec_env": "batched"}, "batched"), ({"n_envs": 2, "vec_env": "batched"}, "batched"),
+    ({"n_envs": 2}, "batched"), ({"n_envs": 1}, "dummy"), ({"n_envs": 1, "vec_env": "batched"}, "batched"),
     ({"n_envs": 3, "vec_env": "subproc"}, "subproc"), ({"n_envs": 1, "vec_env": "subproc"}, "dummy"),
     ({"n_envs": 3, "env": TUNING}, "subproc"), ({"n_envs": 3, "vec_env": None}, "batched"),
-    ({"n_envs": 2, "workers": 1}, "batched"), ({"n_envs": 1, "workers": 1}, "batched"),
+    ({"n_envs": 1, "workers": 1}, "batched"),
 ])
-def test_auto_takes_the_batched_env_where_its_workers_would_batch(change, kind, monkeypatch):
-    """Two threads: the batched env's two workers batch from three envs on."""
-    from spreadgym import threads
-
-    monkeypatch.setenv(threads.ENV_VAR, "2")
+def test_auto_takes_the_batched_env_where_there_is_one(change, kind):
     raw = read_config(default_config_path("ppo"))
     assert validate_config("ppo", {**raw, **change}, "x").vec_env_kind == kind
 
@@ -144,23 +177,23 @@ def test_bad_vec_env_keys_are_one_line_errors(change, message):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("normalize", [False, True])
-def test_training_on_the_batched_env_gives_subprocvecenvs_policy_to_the_bit(tmp_path, normalize):
-    """PPO for 48 steps of 3 envs: the policy's parameters (and VecNormalize's statistics)
-    equal, whichever vector env stepped the envs."""
+@pytest.mark.parametrize("algo, normalize", [("ppo", False), ("ppo", True), ("sac", False)])
+def test_training_on_the_batched_env_gives_subprocvecenvs_policy_to_the_bit(tmp_path, algo, normalize):
+    """PPO (or SAC) for 48 steps of 3 envs: the policy's parameters (and VecNormalize's
+    statistics) equal, whichever vector env stepped the envs."""
     import pickle
 
-    from stable_baselines3 import PPO
-
+    from spreadgym.agents.run_config import algo_class
     from spreadgym.agents.training import train
 
+    settings = ({"n_steps": 8, "batch_size": 8, "n_epochs": 2} if algo == "ppo" else
+                {"learning_starts": 12, "batch_size": 8, "buffer_size": 100})
     params, stats = {}, {}
     for kind in ("subproc", "batched"):
         out = tmp_path / kind
-        train("ppo", out, overrides={"n_envs": 3, "vec_env": kind, "env_kwargs.granules": 32, "n_steps": 8,
-                                     "batch_size": 8, "n_epochs": 2, "checkpoint_freq": 1000,
-                                     "normalize": normalize}, timesteps=48, log=lambda message: None)
-        params[kind] = PPO.load(out / "model.zip").policy.state_dict()
+        train(algo, out, overrides={"n_envs": 3, "vec_env": kind, "env_kwargs.granules": 32, "checkpoint_freq": 1000,
+                                    "normalize": normalize, **settings}, timesteps=48, log=lambda message: None)
+        params[kind] = algo_class(algo).load(out / "model.zip").policy.state_dict()
         if normalize:
             saved = pickle.loads((out / "vecnormalize.pkl").read_bytes())
             stats[kind] = (saved.obs_rms.mean, saved.obs_rms.var, saved.ret_rms.mean, saved.ret_rms.var)
@@ -200,3 +233,19 @@ def test_a_stop_signal_to_the_whole_process_group_still_saves_the_model(tmp_path
             os.killpg(process.pid, signal.SIGKILL)
     assert process.returncode == 130, err
     assert (out / "model.zip").is_file() and "Traceback" not in err, err
+
+
+@pytest.mark.slow
+def test_a_run_resumed_with_fewer_threads_than_its_workers_takes_what_there_is(tmp_path, monkeypatch):
+    from spreadgym import threads
+    from spreadgym.agents.training import train
+
+    said = []
+    settings = {"n_envs": 2, "workers": 2, "env_kwargs.granules": 32, "n_steps": 4, "batch_size": 4,
+                "checkpoint_freq": 8}
+    monkeypatch.setenv(threads.ENV_VAR, "2")
+    train("ppo", tmp_path / "run", overrides=settings, timesteps=8, log=said.append)
+    monkeypatch.setenv(threads.ENV_VAR, "1")
+    result = train("ppo", tmp_path / "run", timesteps=16, log=said.append)
+    assert result.num_timesteps == 16 and result.resumed_from == 8
+    assert any("workers 2 is more than the 1 threads" in line for line in said), said
