@@ -353,9 +353,9 @@ def batch_rows(batch: int = 64, repeats: int = 5) -> list[dict]:
     core = batch_series(batch, repeats)
     users = batch_user_rows(batch, repeats) + [training_env_rows(repeats=repeats)]
     for group in [rows, core, *users]:
-        base = group[0]["designs_per_s"]  # one by one at one thread
+        base = group[0]["designs_per_s"]  # one by one at one thread; SubprocVecEnv at 2 envs for train's
         for row in group:
-            row["ratio_to_one_by_one_at_1_thread"] = row["designs_per_s"] / base
+            row["ratio_to_group_first_row"] = row["designs_per_s"] / base
     return rows + core + [row for group in users for row in group]
 
 

@@ -52,8 +52,9 @@ from spreadgym.spread.pipeline import (
 from spreadgym.spread.von_mises import LARGE_KAPPA
 
 PART_GRANULES = 4096
-"""Departed granules per part of the flight stage at most (about 2 ms of flight); a batch
-has at least PARTS_PER_THREAD parts per thread, so that the parts share out evenly."""
+"""Departed granules per part of the flight stage at most (about 2 ms of flight); on more
+than one thread a batch has at least PARTS_PER_THREAD parts per thread, so that the parts
+share out evenly (on one, parts of PART_GRANULES: splitting would only add calls)."""
 PARTS_PER_THREAD = 4
 SMALLEST_PART = 256  # granules: a part's call and checks cost about what 20 granules' flights do
 
