@@ -40,7 +40,8 @@ class BatchedVecEnv(VecEnv):
                              f"(SB3 resets an ended env in the step that ends it), got "
                              f"{vector_env.metadata.get('autoreset_mode')!r}")
         self.vector_env = vector_env
-        self._each = hasattr(vector_env, "step_each") and hasattr(vector_env, "reset_each")
+        self._each = (vector_env.unwrapped is vector_env  # a wrapper's own step would be skipped
+                      and hasattr(vector_env, "step_each") and hasattr(vector_env, "reset_each"))
         self._actions: Optional[np.ndarray] = None
         super().__init__(vector_env.num_envs, vector_env.single_observation_space, vector_env.single_action_space)
 
@@ -50,6 +51,8 @@ class BatchedVecEnv(VecEnv):
         options = self._options[0]
         if any(o != options for o in self._options):
             raise ValueError("BatchedVecEnv resets every env with the same options; got different ones per env")
+        if "reset_mask" in options:
+            raise ValueError("BatchedVecEnv resets every env: options['reset_mask'] is not for SB3's reset")
         seeds = None if all(s is None for s in self._seeds) else list(self._seeds)
         self._actions = None
         if self._each:

@@ -182,7 +182,6 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
         if cfg.workers is not None and cfg.workers > threads.thread_count():  # resumed on a smaller machine
             log(f"resuming: workers {cfg.workers} is more than the {threads.thread_count()} threads spreadgym may "
                 f"use here; using {threads.thread_count()} (what is trained on does not depend on it)")
-            cfg = cfg.replace(workers=threads.thread_count())
     else:
         path = Path(config_path) if config_path else default_config_path(algo)
         raw = read_config(path)
@@ -219,7 +218,8 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
     resumed_from = None
     model = None
     with tempfile.TemporaryDirectory(prefix="spreadgym-workers-") as error_dir:
-        venv = make_training_env(cfg, error_dir)
+        workers = cfg.workers if cfg.workers is None else min(cfg.workers, threads.thread_count())
+        venv = make_training_env(cfg.replace(workers=workers), error_dir)  # config.yaml keeps cfg's count
         try:
             if checkpoints:
                 model, venv, resumed_from = _resume(cls, cfg, checkpoints, venv, out_dir, log)

@@ -153,6 +153,8 @@ def _serve(pipe: Connection, make, num_envs: int, share: int, device_name: str, 
         while True:
             try:
                 pipe.send(answer)
+            except OSError:
+                raise  # the parent has gone, or closed this pipe (`close`): returned from below
             except Exception as error:  # noqa: BLE001 (it did not pickle, so nothing was sent)
                 pipe.send(("error", RuntimeError(f"a vector env worker's answer does not pickle: "
                                                  f"{type(error).__name__}: {error}")))

@@ -19,27 +19,35 @@ DESIGN = "spreadgym/SpinnerDesign-v1"
 TUNING = "spreadgym/SpreaderTuning-v1"
 
 
-def assert_same(a, b, where="info"):
-    """Equal values (numpy scalars equal to Python ones), arrays equal to the bit, dicts key for key."""
+def assert_same(a, b, where="info", strict=False):
+    """Equal values, arrays equal to the bit, dicts key for key; numpy scalars equal to
+    Python numbers unless `strict`, which asks for the same types throughout."""
+    if strict:
+        assert type(a) is type(b), f"{where}: {type(a).__name__} != {type(b).__name__}"
     if isinstance(a, dict):
         assert isinstance(b, dict) and list(a) == list(b), f"{where}: keys {list(a)} != {list(b)}"
         for key in a:
-            assert_same(a[key], b[key], f"{where}.{key}")
+            assert_same(a[key], b[key], f"{where}.{key}", strict)
+    elif strict and isinstance(a, (list, tuple)):
+        assert len(a) == len(b), f"{where}: {a!r} != {b!r}"
+        for i, (x, y) in enumerate(zip(a, b)):
+            assert_same(x, y, f"{where}[{i}]", strict)
     elif isinstance(a, (np.ndarray, list, tuple)):
         assert np.array_equal(np.asarray(a), np.asarray(b)), f"{where}: {a!r} != {b!r}"
+        assert not strict or np.asarray(a).dtype == np.asarray(b).dtype, f"{where}: dtypes differ"
     elif isinstance(a, float):
         assert np.float64(a).tobytes() == np.float64(b).tobytes(), f"{where}: {a!r} != {b!r}"
     else:
         assert a == b, f"{where}: {a!r} != {b!r}"
 
 
-def step_both(ours, theirs, steps: int, seed: int = 0):
+def step_both(ours, theirs, steps: int, seed: int = 0, strict: bool = False):
     """Step both VecEnvs with the same random actions; compare everything SB3 reads (the
     rewards as `theirs` types them: SubprocVecEnv float64, DummyVecEnv float32)."""
     assert np.array_equal(ours.reset(), theirs.reset())
     assert ours._seeds == [None] * ours.num_envs and ours._options == [{}] * ours.num_envs  # used once
     for i, (a, b) in enumerate(zip(ours.reset_infos, theirs.reset_infos)):
-        assert_same(b, a, f"reset_infos[{i}]")
+        assert_same(b, a, f"reset_infos[{i}]", strict)
     rng = np.random.default_rng(seed)
     ends = cut = 0
     for _ in range(steps):
@@ -51,9 +59,9 @@ def step_both(ours, theirs, steps: int, seed: int = 0):
         assert np.array_equal(done_a, done_b)
         for i, (a, b) in enumerate(zip(info_a, info_b)):
             b = {key: value for key, value in b.items() if key != "episode"}  # Monitor's (timed); no VecMonitor here
-            assert_same(b, a, f"infos[{i}]")
+            assert_same(b, a, f"infos[{i}]", strict)
         for i, (a, b) in enumerate(zip(ours.reset_infos, theirs.reset_infos)):
-            assert_same(b, a, f"reset_infos[{i}] after a step")
+            assert_same(b, a, f"reset_infos[{i}] after a step", strict)
         ends += int(done_a.sum())
         cut += sum(info["TimeLimit.truncated"] for info in info_a)
     return ends, cut
@@ -68,7 +76,7 @@ def test_the_design_tasks_step_as_in_subprocvecenv_workers():
     ours = BatchedVecEnv(gym.make_vec(DESIGN, num_envs=3, autoreset_mode="same_step", workers=2, **kwargs))
     ours.seed(5)
     try:
-        assert step_both(ours, theirs, steps=3) == (9, 0)
+        assert step_both(ours, theirs, steps=3, strict=True) == (9, 0)  # each info as the env gave it
     finally:
         ours.close()
         theirs.close()
@@ -131,6 +139,9 @@ def test_what_the_adapter_cannot_do_is_said():
         env.step_wait()
     env.set_options([{"a": 1}, {}])
     with pytest.raises(ValueError, match="same options"):
+        env.reset()
+    env.set_options({"reset_mask": np.ones(2, dtype=bool)})
+    with pytest.raises(ValueError, match="reset_mask"):
         env.reset()
     env.close()
 
@@ -249,3 +260,4 @@ def test_a_run_resumed_with_fewer_threads_than_its_workers_takes_what_there_is(t
     result = train("ppo", tmp_path / "run", timesteps=16, log=said.append)
     assert result.num_timesteps == 16 and result.resumed_from == 8
     assert any("workers 2 is more than the 1 threads" in line for line in said), said
+    assert "workers: 2\n" in (tmp_path / "run" / "config.yaml").read_text(encoding="utf-8")  # the run's own count
