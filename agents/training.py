@@ -173,6 +173,7 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
     ckpt_dir = out_dir / "checkpoints"
     checkpoints = list_checkpoints(ckpt_dir)
 
+    fewer_workers = None  # a resumed run's workers where this machine has fewer threads
     if checkpoints:
         cfg = load_run_config(out_dir, algo)
         ignored = [name for name, v in (("--config", config_path), ("--set", overrides), ("--env", env_id),
@@ -180,8 +181,9 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
         if ignored:
             log(f"resuming: {', '.join(ignored)} ignored, the run keeps {out_dir / 'config.yaml'}")
         if cfg.workers is not None and cfg.workers > threads.thread_count():  # resumed on a smaller machine
-            log(f"resuming: workers {cfg.workers} is more than the {threads.thread_count()} threads spreadgym may "
-                f"use here; using {threads.thread_count()} (what is trained on does not depend on it)")
+            fewer_workers = threads.thread_count()
+            log(f"resuming: workers {cfg.workers} is more than the {fewer_workers} threads spreadgym may "
+                f"use here; using {fewer_workers} (what is trained on does not depend on it)")
     else:
         path = Path(config_path) if config_path else default_config_path(algo)
         raw = read_config(path)
@@ -218,8 +220,8 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
     resumed_from = None
     model = None
     with tempfile.TemporaryDirectory(prefix="spreadgym-workers-") as error_dir:
-        workers = cfg.workers if cfg.workers is None else min(cfg.workers, threads.thread_count())
-        venv = make_training_env(cfg.replace(workers=workers), error_dir)  # config.yaml keeps cfg's count
+        venv = make_training_env(cfg if fewer_workers is None else cfg.replace(workers=fewer_workers),
+                                 error_dir)  # config.yaml keeps the run's own count
         try:
             if checkpoints:
                 model, venv, resumed_from = _resume(cls, cfg, checkpoints, venv, out_dir, log)

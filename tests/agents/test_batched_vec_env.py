@@ -254,6 +254,9 @@ def test_a_run_resumed_with_fewer_threads_than_its_workers_takes_what_there_is(t
     said = []
     settings = {"n_envs": 2, "workers": 2, "env_kwargs.granules": 32, "n_steps": 4, "batch_size": 4,
                 "checkpoint_freq": 8}
+    monkeypatch.setenv(threads.ENV_VAR, "1")
+    with pytest.raises(ConfigError, match="^workers: 2 processes for the 1 threads"):  # a new run: its own error
+        train("ppo", tmp_path / "new", overrides=settings, timesteps=8, log=said.append)
     monkeypatch.setenv(threads.ENV_VAR, "2")
     train("ppo", tmp_path / "run", overrides=settings, timesteps=8, log=said.append)
     monkeypatch.setenv(threads.ENV_VAR, "1")
