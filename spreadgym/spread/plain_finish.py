@@ -181,8 +181,9 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
         kind[2].append(d)
     parts = []  # (flight, lift, granule rows: a slice or indices)
     count = threads.thread_count()
-    step = (max(owner.size, 1) if on == "cuda" else PART_GRANULES if count == 1 else
-            int(np.clip(-(-owner.size // (PARTS_PER_THREAD * count)), SMALLEST_PART, PART_GRANULES)))
+    parts_wanted = PARTS_PER_THREAD * count if count > 1 else 1  # on one thread, more parts only add calls
+    step = (max(owner.size, 1) if on == "cuda" else
+            int(np.clip(-(-owner.size // parts_wanted), SMALLEST_PART, PART_GRANULES)))
     for flight, lift, members in kinds:
         rows = np.flatnonzero(np.isin(owner, members)) if len(kinds) > 1 else None
         size = owner.size if rows is None else rows.size
