@@ -95,7 +95,7 @@ class BatchedVecEnv(VecEnv):
         """The vector env's attribute (for the spaces, one env's), once per env of `indices`
         (the sub-envs share it)."""
         name = f"single_{attr_name}" if attr_name in ("observation_space", "action_space") else attr_name
-        return [getattr(self.vector_env, name)] * len(self._indices(indices))
+        return [getattr(self.vector_env, name)] * len(list(self._get_indices(indices)))
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         raise AttributeError(f"BatchedVecEnv cannot set {attr_name!r} on its sub-envs (they live in the batched "
@@ -107,16 +107,11 @@ class BatchedVecEnv(VecEnv):
 
     def env_is_wrapped(self, wrapper_class, indices: VecEnvIndices = None) -> list[bool]:
         """No sub-env is wrapped (a `VecMonitor` over this env keeps the episode records)."""
-        return [False] * len(self._indices(indices))
+        return [False] * len(list(self._get_indices(indices)))
 
     def get_images(self) -> Sequence[Optional[np.ndarray]]:
         frames = self.vector_env.render()
         return [None] * self.num_envs if frames is None else list(frames)
-
-    def _indices(self, indices: VecEnvIndices) -> list[int]:
-        if indices is None:
-            return list(range(self.num_envs))
-        return [indices] if isinstance(indices, int) else list(indices)
 
 
 def unstacked_step(vector_env: VectorEnv, actions: np.ndarray) -> tuple:
@@ -146,13 +141,8 @@ def env_infos(infos: dict, num_envs: int) -> list[dict]:
         if key.startswith("_") and key[1:] in infos:
             continue
         mask = infos.get(f"_{key}")
-        if isinstance(values, dict):
-            nested = env_infos(values, num_envs)
-            for i in range(num_envs):
-                if mask is None or mask[i]:
-                    each[i][key] = nested[i]
-            continue
+        per_env = env_infos(values, num_envs) if isinstance(values, dict) else values
         for i in range(num_envs):
             if mask is None or mask[i]:
-                each[i][key] = values[i]
+                each[i][key] = per_env[i]
     return each
