@@ -720,16 +720,19 @@ def flights(table: Table, until: float, toy: bool, cores: int) -> None:
 
 def fly_parts(n: int, parts: int, name: str) -> np.ndarray:
     """Landing points of n synthetic launches (`launches`) flown in `parts` `flight.fly`
-    calls side by side on the threads, on device `name` (the paper scene's flight)."""
+    calls side by side on the threads, on device `name` (the paper scene's flight and its
+    fertilizer's particle density, configs/materials.yaml)."""
+    from spreadgym.config.materials import load_library
     from spreadgym.config.scene import load_scene
     from spreadgym.spread import flight
     from spreadgym.threads import thread_map
 
-    paper = load_scene("paper").flight
+    paper = load_scene("paper")
+    density = load_library().fertilizer(paper.fertilizer).particle_density_kg_m3
     position, height, velocity, diameter = launches(n)
     rows = np.array_split(np.arange(n), parts)
     found = thread_map(lambda i: flight.fly(position[rows[i]], height[rows[i]], velocity[rows[i]], diameter[rows[i]],
-                                            1734.0, paper, device=name).position_m, parts)
+                                            density, paper.flight, device=name).position_m, parts)
     return np.concatenate(found)
 
 
