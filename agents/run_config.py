@@ -12,8 +12,9 @@ Run keys:
     n_envs           parallel envs
     vec_env          auto | batched | subproc: how the n_envs step (agents/training_env.py);
                      auto: the batched vector env where the env has one (the SpinnerDesign
-                     tasks) and n_envs > 1 (or workers is set), else SubprocVecEnv (n_envs > 1)
-                     or DummyVecEnv; what SB3 trains on is the same whichever steps them
+                     tasks), it takes the env_kwargs and n_envs > 1 (or workers is set), else
+                     SubprocVecEnv (n_envs > 1) or DummyVecEnv; what SB3 trains on is the
+                     same whichever steps them
     workers          processes of the batched vector env (null: one per thread, at most n_envs)
     n_timesteps      total env steps of the run
     normalize        false | true | {norm_obs, norm_reward, clip_obs, clip_reward, gamma, epsilon}
@@ -50,6 +51,26 @@ WRITTEN_KEYS = ("trained",)  # written into DIR/config.yaml by train, ignored wh
 RESERVED = {"policy", "env", "tensorboard_log", "verbose", "seed", "device", "_init_setup_model", "policy_kwargs"}
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu", "silu")
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
+
+
+def batched_refusal(env_kwargs: dict[str, Any]) -> Optional[str]:
+    """Why the SpinnerDesign vector env cannot take these env_kwargs, or None if it can:
+    gym.make's own keys (max_episode_steps, disable_env_checker) wrap a single env and are
+    no keywords of a vector env, and it renders rgb_array frames only. SubprocVecEnv runs
+    such a config (one gym.make per env)."""
+    import gymnasium
+
+    from spreadgym.envs.vector import SpinnerDesignVectorEnv
+
+    make_keys = [name for name, parameter in inspect.signature(gymnasium.make).parameters.items()
+                 if parameter.default is not inspect.Parameter.empty]
+    for key in make_keys:
+        if key in env_kwargs:
+            return f"env_kwargs.{key} is a key of gym.make, which the vector env does not take"
+    render_mode = env_kwargs.get("render_mode")
+    if render_mode is not None and render_mode not in SpinnerDesignVectorEnv.metadata["render_modes"]:
+        return f"env_kwargs.render_mode {render_mode!r}: the vector env renders only rgb_array"
+    return None
 
 
 def algo_class(algo: str):
@@ -128,8 +149,12 @@ class RunConfig(StrictModel):
         if self.vec_env == "batched" and is_tuning(self.env):
             raise ValueError(f"vec_env: batched needs an env with a batched vector env (the SpinnerDesign tasks); "
                              f"{self.env} has none: use auto or subproc")
+        refusal = batched_refusal(self.env_kwargs)
+        if self.vec_env == "batched" and refusal:
+            raise ValueError(f"vec_env: batched cannot run this config ({refusal}): use auto or subproc")
         if self.workers is not None and self.vec_env_kind != "batched":
-            why = "vec_env: subproc" if self.vec_env == "subproc" else f"{self.env} has no batched vector env"
+            why = ("vec_env: subproc" if self.vec_env == "subproc" else refusal if refusal and not is_tuning(self.env)
+                   else f"{self.env} has no batched vector env")
             raise ValueError(f"workers: only the batched vector env has workers ({why})")
         if self.workers is not None and self.workers > self.n_envs:
             raise ValueError(f"workers: at most n_envs ({self.n_envs}), got {self.workers}")
@@ -139,11 +164,13 @@ class RunConfig(StrictModel):
     def vec_env_kind(self) -> str:
         """What steps the run's envs: "batched" (spreadgym's vector env in SB3's clothes),
         "subproc" (SB3's SubprocVecEnv) or "dummy" (SB3's DummyVecEnv, one env in this
-        process). `auto` takes the batched env wherever the env has one and n_envs > 1 (or
-        `workers` is set): on two cores it tied SubprocVecEnv at one env per worker and led
-        from two per worker on (docs/agents.md). What SB3 trains on is the same either way."""
+        process). `auto` takes the batched env wherever the env has one, it can run the
+        env_kwargs (`batched_refusal`) and n_envs > 1 (or `workers` is set): on two cores it
+        tied SubprocVecEnv at one env per worker and led from two per worker on
+        (docs/agents.md). What SB3 trains on is the same either way."""
         if self.vec_env == "auto":
-            batches = (self.workers is not None or self.n_envs > 1) and not is_tuning(self.env)
+            batches = ((self.workers is not None or self.n_envs > 1) and not is_tuning(self.env)
+                       and batched_refusal(self.env_kwargs) is None)
             return "batched" if batches else "subproc" if self.n_envs > 1 else "dummy"
         if self.vec_env == "batched":
             return "batched"

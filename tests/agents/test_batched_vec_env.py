@@ -166,6 +166,11 @@ def test_train_records_episodes_with_vecmonitor():
     ({"n_envs": 3, "vec_env": "subproc"}, "subproc"), ({"n_envs": 1, "vec_env": "subproc"}, "dummy"),
     ({"n_envs": 3, "env": TUNING}, "subproc"), ({"n_envs": 3, "vec_env": None}, "batched"),
     ({"n_envs": 1, "workers": 1}, "batched"),
+    # what only one gym.make per env runs: auto leaves it to SubprocVecEnv
+    ({"n_envs": 2, "env_kwargs": {"max_episode_steps": 3}}, "subproc"),
+    ({"n_envs": 2, "env_kwargs": {"disable_env_checker": False}}, "subproc"),
+    ({"n_envs": 2, "env_kwargs": {"render_mode": "human"}}, "subproc"),
+    ({"n_envs": 2, "env_kwargs": {"render_mode": "rgb_array"}}, "batched"),
 ])
 def test_auto_takes_the_batched_env_where_there_is_one(change, kind):
     raw = read_config(default_config_path("ppo"))
@@ -179,6 +184,10 @@ def test_auto_takes_the_batched_env_where_there_is_one(change, kind):
     ({"n_envs": 2, "workers": 3}, "workers: at most n_envs (2), got 3"),
     ({"workers": 0}, "workers: Input should be greater than or equal to 1"),
     ({"vec_env": "ray"}, "vec_env: Input should be 'auto', 'batched' or 'subproc'"),
+    ({"vec_env": "batched", "env_kwargs": {"max_episode_steps": 3}},
+     "vec_env: batched cannot run this config (env_kwargs.max_episode_steps is a key of gym.make"),
+    ({"n_envs": 2, "workers": 2, "env_kwargs": {"render_mode": "human"}},
+     "workers: only the batched vector env has workers (env_kwargs.render_mode 'human': the vector env renders only"),
 ])
 def test_bad_vec_env_keys_are_one_line_errors(change, message):
     raw = read_config(default_config_path("ppo"))
