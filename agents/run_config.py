@@ -11,10 +11,10 @@ Run keys:
     env_kwargs       gym.make keyword arguments (checked by the env: unknown keys fail)
     n_envs           parallel envs
     vec_env          auto | batched | subproc: how the n_envs step (agents/training_env.py);
-                     auto: the batched vector env where the env has one (the SpinnerDesign
-                     tasks), it takes the env_kwargs and n_envs > 1 (or workers is set), else
-                     SubprocVecEnv (n_envs > 1) or DummyVecEnv; what SB3 trains on is the
-                     same whichever steps them
+                     auto: the batched vector env where it batches (the SpinnerDesign tasks,
+                     env_kwargs it takes, n_envs above spreadgym's threads, or workers set),
+                     else SubprocVecEnv (n_envs > 1) or DummyVecEnv; what SB3 trains on is
+                     the same whichever steps them
     workers          processes of the batched vector env (null: one per thread, at most n_envs)
     n_timesteps      total env steps of the run
     normalize        false | true | {norm_obs, norm_reward, clip_obs, clip_reward, gamma, epsilon}
@@ -40,6 +40,7 @@ from typing import Any, Literal, Optional
 
 from pydantic import Field, create_model, field_validator, model_validator
 
+from spreadgym import threads
 from spreadgym.agents.evaluation import canonical_env_id, is_tuning
 from spreadgym.config.base import Integer, Real, StrictModel, validate
 from spreadgym.config.resources import config_dir, read_yaml
@@ -164,13 +165,15 @@ class RunConfig(StrictModel):
     def vec_env_kind(self) -> str:
         """What steps the run's envs: "batched" (spreadgym's vector env in SB3's clothes),
         "subproc" (SB3's SubprocVecEnv) or "dummy" (SB3's DummyVecEnv, one env in this
-        process). `auto` takes the batched env wherever the env has one, it can run the
-        env_kwargs (`batched_refusal`) and n_envs > 1 (or `workers` is set): on two cores it
-        tied SubprocVecEnv at one env per worker and led from two per worker on
-        (docs/agents.md). What SB3 trains on is the same either way."""
+        process). `auto` takes the batched env where it batches: the env has one, it can run
+        the env_kwargs (`batched_refusal`), and its workers (one per thread) hold two envs or
+        more, n_envs > the threads spreadgym may use (or `workers` is set). On two cores it
+        led SubprocVecEnv by 15-20 % at four envs a worker, and at one env a worker (a vector
+        env of one, nothing to batch) tied it in the medians and trailed it by about 5 % in
+        the best blocks (docs/agents.md). What SB3 trains on is the same either way."""
         if self.vec_env == "auto":
-            batches = ((self.workers is not None or self.n_envs > 1) and not is_tuning(self.env)
-                       and batched_refusal(self.env_kwargs) is None)
+            batches = (not is_tuning(self.env) and batched_refusal(self.env_kwargs) is None
+                       and (self.workers is not None or self.n_envs > threads.thread_count()))
             return "batched" if batches else "subproc" if self.n_envs > 1 else "dummy"
         if self.vec_env == "batched":
             return "batched"

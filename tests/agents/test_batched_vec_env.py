@@ -149,7 +149,7 @@ def test_what_the_adapter_cannot_do_is_said():
 def test_train_records_episodes_with_vecmonitor():
     from spreadgym.agents.training_env import make_training_env
 
-    cfg = validate_config("ppo", {**read_config(default_config_path("ppo")), "n_envs": 2,
+    cfg = validate_config("ppo", {**read_config(default_config_path("ppo")), "n_envs": 2, "workers": 1,
                                   "env_kwargs": {"granules": 32}}, "x")
     env = make_training_env(cfg, "errors")
     try:
@@ -162,19 +162,29 @@ def test_train_records_episodes_with_vecmonitor():
 
 
 @pytest.mark.parametrize("change, kind", [
-    ({"n_envs": 2}, "batched"), ({"n_envs": 1}, "dummy"), ({"n_envs": 1, "vec_env": "batched"}, "batched"),
+    ({"n_envs": 3}, "batched"), ({"n_envs": 1}, "dummy"), ({"n_envs": 1, "vec_env": "batched"}, "batched"),
     ({"n_envs": 3, "vec_env": "subproc"}, "subproc"), ({"n_envs": 1, "vec_env": "subproc"}, "dummy"),
     ({"n_envs": 3, "env": TUNING}, "subproc"), ({"n_envs": 3, "vec_env": None}, "batched"),
-    ({"n_envs": 1, "workers": 1}, "batched"),
+    ({"n_envs": 1, "workers": 1}, "batched"), ({"n_envs": 2, "workers": 2}, "batched"),
+    # one env a worker (2 threads): nothing to batch, SubprocVecEnv
+    ({"n_envs": 2}, "subproc"),
     # what only one gym.make per env runs: auto leaves it to SubprocVecEnv
-    ({"n_envs": 2, "env_kwargs": {"max_episode_steps": 3}}, "subproc"),
-    ({"n_envs": 2, "env_kwargs": {"disable_env_checker": False}}, "subproc"),
-    ({"n_envs": 2, "env_kwargs": {"render_mode": "human"}}, "subproc"),
-    ({"n_envs": 2, "env_kwargs": {"render_mode": "rgb_array"}}, "batched"),
+    ({"n_envs": 3, "env_kwargs": {"max_episode_steps": 3}}, "subproc"),
+    ({"n_envs": 3, "env_kwargs": {"disable_env_checker": False}}, "subproc"),
+    ({"n_envs": 3, "env_kwargs": {"render_mode": "human"}}, "subproc"),
+    ({"n_envs": 3, "env_kwargs": {"render_mode": "rgb_array"}}, "batched"),
 ])
-def test_auto_takes_the_batched_env_where_there_is_one(change, kind):
+def test_auto_takes_the_batched_env_where_it_batches(monkeypatch, change, kind):
+    monkeypatch.setenv("SPREADGYM_THREADS", "2")
     raw = read_config(default_config_path("ppo"))
     assert validate_config("ppo", {**raw, **change}, "x").vec_env_kind == kind
+
+
+def test_auto_batches_above_the_thread_count(monkeypatch):
+    raw = read_config(default_config_path("ppo"))
+    for count, kind in ((8, "subproc"), (9, "batched")):
+        monkeypatch.setenv("SPREADGYM_THREADS", "8")
+        assert validate_config("ppo", {**raw, "n_envs": count}, "x").vec_env_kind == kind
 
 
 @pytest.mark.parametrize("change, message", [

@@ -82,6 +82,6 @@ def test_the_batched_env_takes_one_worker_per_thread_at_most_n_envs(monkeypatch)
     monkeypatch.setattr(gym, "make_vec", make_vec)
     monkeypatch.setenv(threads.ENV_VAR, "5")
     cfg = validate_config("ppo", read_config(default_config_path("ppo")), "shipped")
-    for change in ({"n_envs": 2}, {"n_envs": 8}, {"n_envs": 8, "workers": 2}):
+    for change in ({"n_envs": 2, "vec_env": "batched"}, {"n_envs": 8}, {"n_envs": 8, "workers": 2}):
         training_env.make_training_env(cfg.replace(**change), "errors").close()
     assert asked == [(2, 2), (8, 5), (8, 2)]
