@@ -1,6 +1,6 @@
 """`spreadgym demo`: the main job. The paper's spinner at its published settings (full
 model), better rpm and vane pitch for a wider target swath found by CMA-ES on the fast
-analytic model, and the before/after with the full model: table and pictures."""
+compiled model, and the before/after with the full model: table and pictures."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         default=demo.DEFAULT_TARGET_M, metavar="M",
                         help=f"target swath in m, on the 0.5 m tray grid (default {demo.DEFAULT_TARGET_M:g})")
     parser.add_argument("--budget", type=arguments.COUNT, default=demo.DEFAULT_BUDGET, metavar="N",
-                        help=f"CMA-ES simulations on the analytic model (default {demo.DEFAULT_BUDGET})")
+                        help=f"CMA-ES simulations on the {demo.SEARCH_MODEL} model (default {demo.DEFAULT_BUDGET})")
     parser.add_argument("--granules", type=arguments.GRANULES, default=demo.DEFAULT_GRANULES, metavar="N",
                         help=f"granules per simulation, search and full model (default {demo.DEFAULT_GRANULES})")
     parser.add_argument("--seed", type=arguments.SEED, default=0, help="seed of the search (default 0)")

@@ -216,6 +216,49 @@ def test_the_free_phase_event_root_is_newton_with_a_bisection_guard():
     assert 20 <= updates <= 40 and abs(f - root) < 10 * FRACTION_TOLERANCE
 
 
+def test_a_short_rebound_off_a_face_returns_at_the_located_root_in_few_newton_updates(prepare, monkeypatch):
+    """A granule leaving a leading face at 2 cm/s while sliding out at 2 m/s: Coriolis
+    presses it back within a tenth of a step. The free phase's step finds that return
+    where its fourth-order path meets the face (brentq on the same path, to 1e-10 of the
+    step), starting Newton from the parabola's return 2 v_n / press: at most 4 updates
+    (from the regula falsi guess between the apex and the step's end it took 9 here)."""
+    from scipy.optimize import brentq
+
+    from spreadgym.physics.compiled import free_motion
+    from spreadgym.physics.compiled.event_root import FRACTION_TOLERANCE
+
+    scene = load_scene("paper")
+    _, contacts = prepare(scene)
+    P = layout.pack_parameters(scene, contacts, 6.6e-05, 3.0, 1e-4)
+    V = layout.pack_vanes(scene)
+    radius = 0.0015
+    reach = radius + 0.5 * scene.vanes.thickness_m
+    k, along, vn, xd = 0, 0.5 * V[0, layout.LENGTH], 0.02, 2.0
+    n, u = V[k, [layout.NX, layout.NY]], V[k, [layout.UX, layout.UY]]
+    cx, cy = V[k, [layout.PX, layout.PY]] + along * u + reach * n
+    vx, vy = xd * u + vn * n
+    h, omega, drag = P[layout.STEP], P[layout.OMEGA], P[layout.MU_DISC] * P[layout.GRAVITY]
+    updates = []
+    counted = free_motion.newton_step
+
+    def newton_step(*args):
+        updates.append(1)
+        return counted(*args)
+
+    monkeypatch.setattr(free_motion, "newton_step", newton_step)
+    sx, sy, _, _, used, event, vane, side = free_motion.step.py_func(cx, cy, vx, vy, h, True, drag, reach, P, V)
+    assert (event, vane, side) == (free_motion.FACE, k, 1.0)
+
+    def gap(f):  # the face's distance along the same fourth-order path
+        px, py, _, _ = free_motion.rk4(cx, cy, vx, vy, f * h, omega, drag)
+        return (px - V[k, layout.PX]) * n[0] + (py - V[k, layout.PY]) * n[1] - reach
+
+    root = brentq(gap, 0.02, 1.0, xtol=1e-15)
+    assert 0.01 < root < 0.2  # a short flight, well inside the step
+    assert abs(used / h - root) < 10 * FRACTION_TOLERANCE
+    assert len(updates) <= 4, len(updates)
+
+
 def test_a_granule_sliding_off_a_vane_tip_goes_round_it(prepare):
     """A start found in twin-field's sample: it slides off the tip of a leading face while
     the frame presses it on that face's line. Caught back onto the face at its very end,

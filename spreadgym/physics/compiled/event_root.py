@@ -41,7 +41,8 @@ def newton_step(lo, hi, f, g, slope):
     there. A Newton point outside the bracket (a grazing approach: slope near 0) is
     replaced by the bracket's midpoint, so the bracket at least halves. Returns (lo, hi,
     next f, converged): converged when g = 0 or the next f moves by FRACTION_TOLERANCE
-    at most. Converges quadratically from the regula falsi guess: 2-4 updates."""
+    at most. Converges quadratically from a close guess (the regula falsi guess, or a
+    rebound's parabola): 2-4 updates."""
     if g < 0.0:
         hi = f
     else:
