@@ -87,6 +87,7 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
     g1 = _event_value(RIM, 0, 0.0, ex, ey, reach, P, V)
     if g1 < 0.0:
         best, kind = max(g0, 0.0) / (max(g0, 0.0) - g1), RIM
+    start = best  # where Newton starts on the chosen event (best: the estimate that chose it)
     lo = 0.0  # the bracket's lower end (fractions of the step): after the start of a rebound
     near = (1.001 * reach) ** 2  # squared distance beyond which an end cap is surely not reached
     if below:
@@ -99,10 +100,12 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                 f_lo, guess = 0.0, 2.0
                 if g0 <= ON_SURFACE_M:
                     # on the face at the start (a rebound): the return, bracketed from the
-                    # lower half of the parabola g = vn t - press t^2 / 2, and Newton started
-                    # from its root 2 vn / press where that lies in the step (regula falsi
-                    # from the apex to the step's end is a poor start for a flight much
-                    # shorter than the step: 5-9 updates against 3-4 in the paper scene)
+                    # lower half of the parabola g = vn t - press t^2 / 2. The chord from the
+                    # apex to the step's end (g curves down: its root comes early, not late)
+                    # picks the first event; Newton starts from the parabola's root
+                    # 2 vn / press where that lies in the step (from the chord, a poor start
+                    # for a flight much shorter than the step, it took 5-9 updates, against
+                    # 3-4, in the paper scene)
                     ax, ay = free_acceleration(cx, cy, vx, vy, omega, drag)
                     vn = sd * (vx * V[k, NX] + vy * V[k, NY])
                     press = -sd * (ax * V[k, NX] + ay * V[k, NY])
@@ -114,7 +117,7 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                     if g0 <= 0.0:
                         continue
                     guess = 2.0 * vn / (press * h)
-                f = guess if f_lo < guess < 1.0 else f_lo + (1.0 - f_lo) * g0 / (g0 - g1)
+                f = f_lo + (1.0 - f_lo) * g0 / (g0 - g1)
                 if f >= best:
                     continue
                 # along the vane at the crossing: within the flat face? (its very ends
@@ -124,6 +127,7 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                 x = (mx - V[k, PX]) * V[k, UX] + (my - V[k, PY]) * V[k, UY]
                 if ON_SURFACE_M < x < V[k, LENGTH] - ON_SURFACE_M:
                     best, kind, vane, side, lo = f, FACE, k, sd, f_lo
+                    start = guess if f_lo < guess < 1.0 else f
             for end in (0.0, 1.0):
                 px, py = end_point(k, end, V)
                 if (ex - px) ** 2 + (ey - py) ** 2 >= near:
@@ -133,12 +137,12 @@ def step(cx, cy, vx, vy, h, below, drag, reach, P, V):
                 if g0 > ON_SURFACE_M and g1 < 0.0:
                     f = g0 / (g0 - g1)
                     if f < best:
-                        best, kind, vane, side, lo = f, END_CAP, k, end, 0.0
+                        best, kind, vane, side, lo, start = f, END_CAP, k, end, 0.0, f
     if kind == NONE:
         return ex, ey, evx, evy, h, NONE, -1, 0.0
-    # safeguarded Newton on the re-integrated path, from the regula falsi guess; the
-    # state is the one at the last point evaluated (within FRACTION_TOLERANCE of the root)
-    f, hi = best, 1.0
+    # safeguarded Newton on the re-integrated path, from `start`; the state is the one
+    # at the last point evaluated (within FRACTION_TOLERANCE of the root)
+    f, hi = start, 1.0
     sx, sy, svx, svy = cx, cy, vx, vy
     for _ in range(MAX_ITERATIONS):
         sx, sy, svx, svy = rk4(cx, cy, vx, vy, f * h, omega, drag)
