@@ -3,7 +3,7 @@
 1. Simulate the paper's spinner at its published settings (500 rpm, four radial
    vanes, compound 10-16-10) with the full contact model (pymunk), scored at the
    demo's target swath.
-2. Search rpm and vane pitch with CMA-ES on the fast closed-form model (`analytic`),
+2. Search rpm and vane pitch with CMA-ES on the fast compiled model (SEARCH_MODEL),
    through the SpinnerDesign env (its reward at the target swath), starting from the
    published settings. The search needs hundreds of runs: the cheap model is used
    there, and only there ("model no more than needed").
@@ -55,7 +55,7 @@ class Column:
     pitch_deg: float
     how: str  # how the settings were found
     search_simulations: int = 0
-    fast: dict = field(default_factory=dict)  # info["metrics"] of the analytic model (search sample)
+    fast: dict = field(default_factory=dict)  # info["metrics"] of SEARCH_MODEL (search sample)
     full_wall_s: float = 0.0
     result: Any = None  # SimulationResult of the full model (for pictures)
 
@@ -76,6 +76,8 @@ class Column:
             "model": self.full.model,
             "granules": self.full.granules,
             "full_model_wall_s": self.full_wall_s,
+            # the search model's figures (SEARCH_MODEL); the keys keep the name they had when
+            # the search ran on the analytic model, for those who read this JSON
             "analytic_cv_percent_at_target": self.fast.get("cv_percent_at_target"),
             "analytic_effective_swath_m": self.fast.get("effective_swath_m"),
             "search_simulations": self.search_simulations,
@@ -134,7 +136,7 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
     _say(f"      CV {published.full.cv_percent_at_target:.1f} % at {target_m:g} m, "
          f"effective swath {published.full.effective_swath_m:g} m ({published.full_wall_s:.1f} s)")
 
-    # 2. CMA-ES on the analytic model
+    # 2. CMA-ES on SEARCH_MODEL
     _say(f"[2/{steps}] CMA-ES over rpm and vane pitch on the fast {SEARCH_MODEL} model, {budget} simulations "
          "(the search uses the cheap model; before/after use the full model)")
     env.reset(seed=ctx.search_seed, options=ctx.options())

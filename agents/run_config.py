@@ -166,11 +166,12 @@ class RunConfig(StrictModel):
         """What steps the run's envs: "batched" (spreadgym's vector env in SB3's clothes),
         "subproc" (SB3's SubprocVecEnv) or "dummy" (SB3's DummyVecEnv, one env in this
         process). `auto` takes the batched env where it batches: the env has one, it can run
-        the env_kwargs (`batched_refusal`), and its workers (one per thread) hold two envs or
-        more, n_envs > the threads spreadgym may use (or `workers` is set). On two cores it
-        led SubprocVecEnv by 15-20 % at four envs a worker, and at one env a worker (a vector
-        env of one, nothing to batch) tied it in the medians and trailed it by about 5 % in
-        the best blocks (docs/agents.md). What SB3 trains on is the same either way."""
+        the env_kwargs (`batched_refusal`), and there are more envs than threads spreadgym
+        may use (its workers, one per thread, then hold more than one env on the whole), or
+        `workers` is set. On two cores it led SubprocVecEnv by 20-22 % at four envs a worker,
+        and at one env a worker (a vector env of one, nothing to batch) tied it in the medians
+        and trailed it by 5-10 % in the best blocks (docs/agents.md). What SB3 trains on is
+        the same either way."""
         if self.vec_env == "auto":
             batches = (not is_tuning(self.env) and batched_refusal(self.env_kwargs) is None
                        and (self.workers is not None or self.n_envs > threads.thread_count()))

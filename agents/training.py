@@ -219,6 +219,9 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
     total = cfg.n_timesteps
     resumed_from = None
     model = None
+    stepped_by = {"batched": "spreadgym's batched vector env", "subproc": "SubprocVecEnv, a process each",
+                  "dummy": "DummyVecEnv, in this process"}[cfg.vec_env_kind]
+    log(f"envs: {cfg.n_envs} in {stepped_by} (vec_env {cfg.vec_env})")  # auto's choice depends on the threads
     with tempfile.TemporaryDirectory(prefix="spreadgym-workers-") as error_dir:
         venv = make_training_env(cfg if fewer_workers is None else cfg.replace(workers=fewer_workers),
                                  error_dir)  # config.yaml keeps the run's own count

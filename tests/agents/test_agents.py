@@ -154,6 +154,7 @@ def test_resume_continues_from_the_newest_checkpoint(trained, capsys, tmp_path):
     code, out, err = run_cli(capsys, ["train", "--algo", "ppo", "--timesteps", "96", "--out", str(run)])
     assert code == 0, err
     assert "resuming from" in err and "rl_model_64_steps.zip" in err
+    assert "envs: 1 in DummyVecEnv, in this process (vec_env auto)" in err  # what stepped them, said each time
     config = yaml.safe_load((run / "config.yaml").read_text())
     assert config["trained"]["resumed_from"] == 64 and config["trained"]["num_timesteps"] == 96
     assert config["env_kwargs"] == {"granules": GRANULES}  # the saved config, not the shipped one
