@@ -728,7 +728,7 @@ def fly_parts(n: int, parts: int, name: str) -> np.ndarray:
     from spreadgym.threads import thread_map
 
     paper = load_scene("paper")
-    density = load_library().fertilizer(paper.fertilizer).particle_density_kg_m3
+    density = load_library().fertilizer_of(paper).particle_density_kg_m3
     position, height, velocity, diameter = launches(n)
     rows = np.array_split(np.arange(n), parts)
     found = thread_map(lambda i: flight.fly(position[rows[i]], height[rows[i]], velocity[rows[i]], diameter[rows[i]],

@@ -247,7 +247,7 @@ def _flight_launches(speeds_m_s: Sequence[float], elevations_deg: Sequence[float
             v.append([speed * math.cos(a), 0.0, speed * math.sin(a)])
     v = np.array(v)
     n = v.shape[0]
-    density = load_library().fertilizer(load_scene("paper").fertilizer).particle_density_kg_m3  # configs/materials.yaml
+    density = load_library().fertilizer_of(load_scene("paper")).particle_density_kg_m3  # configs/materials.yaml
     return np.zeros((n, 2)), np.full(n, 0.8), v, np.full(n, 0.003), np.full(n, density)
 
 
