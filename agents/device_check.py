@@ -46,6 +46,9 @@ cut short still returns what it did):
    - the flight alone (`flight.fly` on "cuda", one launch, against the CPU kernel in parts
      on the 16 threads), 64 and 1024 designs' worth of synthetic launches, the landing
      points compared (gpu_flight.csv);
+   - the copies' turns alone (`cuda_turns.draw_turns`, one launch, against the CPU's
+     draws, designs side by side on the 16 threads), 64 and 1024 paper designs, the
+     cosines compared (gpu.json, "turns");
    - the spinner stage alone (`model.simulate_compiled_batch`, host<->device copies
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
@@ -559,7 +562,8 @@ def gpu_main(args) -> None:
             say("no CUDA GPU here (numba.cuda sees none): GPU sections skipped")
             report["skipped"] = "no CUDA GPU found by numba.cuda"
             return
-        with section("CUDA compile of the spinner and flight kernels (a small paper batch, 64 flights)", 420):
+        with section("CUDA compile of the spinner, flight and turns kernels (a small paper batch, 64 flights, "
+                     "one design's turns)", 420):
             from numba import cuda
 
             try:
@@ -598,6 +602,15 @@ def gpu_main(args) -> None:
                 raise
             report["flight_compile_and_first_launch_s"] = time.perf_counter() - started
             say(f"flight kernel compiled and launched in {report['flight_compile_and_first_launch_s']:.1f} s")
+            started = time.perf_counter()
+            try:
+                draw_turns_of(turn_inputs(1, toy), "cuda")
+            except Exception as error:  # as the flight's
+                report["turns_compile_error"] = f"{type(error).__name__}: {error}"[:4000]
+                print(traceback.format_exc()[-4000:], flush=True)
+                raise
+            report["turns_compile_and_first_launch_s"] = time.perf_counter() - started
+            say(f"turns kernel compiled and launched in {report['turns_compile_and_first_launch_s']:.1f} s")
     finally:
         write_json(out / "gpu.json", report)
         (work / "compiled").write_text(json.dumps(report, default=str))
@@ -622,6 +635,9 @@ def gpu_main(args) -> None:
             schedules(spinner, library, until, granules, toy, cores)
         with section("flights alone: GPU against CPU", 40) as until:
             flights(Table(out / "gpu_flight.csv"), until, toy, cores)
+        with section("the copies' turns alone: GPU against CPU", 30) as until:
+            report["turns"] = turns(until, toy, cores)
+            write_json(out / "gpu.json", report)
         with section("spinner stage alone: GPU, CPU 1 and 16 threads", args.spinner_cap_s) as until:
             spinner_stage(spinner, library, until, granules, toy, cores)
     finally:
@@ -716,6 +732,90 @@ def flights(table: Table, until: float, toy: bool, cores: int) -> None:
             say(f"flight {name:4s} {designs:5d} designs: {median * 1e3:8.1f} ms ({n / median / 1e6:6.2f} M granules/s)"
                 + (f", landings equal {row['landings_bit_equal']}/{n}, max diff {row['max_landing_diff_m']:.2g} m"
                    if "max_landing_diff_m" in row else ""))
+
+
+def turn_inputs(designs: int, toy: bool) -> dict:
+    """`cuda_turns.draw_turns`' arguments for `designs` paper designs: one paper design's
+    granules (2048 in 8 replicates; 16 in 2 when `toy`) and the laws of their turns
+    (`rotations.TurnLaws`), repeated, each design's replicates on streams of their own."""
+    from spreadgym.config.materials import load_library
+    from spreadgym.config.scene import load_scene
+    from spreadgym.physics.compiled import pcg64
+    from spreadgym.physics.granules import sample_granules
+    from spreadgym.spread import rotations
+
+    paper = load_scene("paper", {"sim.granules": 16, "sim.replicates": 2} if toy else {})
+    one = sample_granules(paper, load_library().fertilizer_of(paper))
+    laws = rotations.TurnLaws.of(one.release_xy_m, [paper], [one.count])
+    copies = rotations.copies_for(paper)[0]
+    first = np.arange(designs + 1) * one.count
+    run_first, run_start, run_stop, streams = rotations.turn_streams(
+        np.tile(one.replicate, designs), first, list(range(designs)), [0] * designs)
+    return {"states": pcg64.seeded(streams), "run_design": np.repeat(np.arange(designs), np.diff(run_first)),
+            "run_start": run_start, "run_stop": run_stop, "first": first,
+            "copies": np.full(designs, copies, dtype=np.int64),
+            "turn_first": np.arange(designs + 1) * copies * one.count,
+            "kappa": np.tile(laws.kappa, designs), "cos_mu": np.tile(laws.cos_mu, designs),
+            "sin_mu": np.tile(laws.sin_mu, designs)}
+
+
+def draw_turns_of(inputs: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """The turns of `turn_inputs` on device `name`: one GPU launch, or on the CPU each
+    design's runs by `von_mises.antithetic_turns`, designs side by side on the threads (as
+    the plain finish's kernel draws them), into the same flat layout."""
+    if name == "cuda":
+        from spreadgym.spread import cuda_turns
+
+        return cuda_turns.draw_turns(**{**inputs, "states": inputs["states"].copy()})
+    from spreadgym.spread import von_mises
+    from spreadgym.threads import thread_map
+
+    first, turn_first, copies = inputs["first"], inputs["turn_first"], inputs["copies"]
+    cos, sin = np.empty(int(turn_first[-1])), np.empty(int(turn_first[-1]))
+    runs = np.concatenate([[0], np.cumsum(np.bincount(inputs["run_design"], minlength=first.size - 1))])
+
+    def design(d: int) -> None:
+        a, b, k = first[d], first[d + 1], int(copies[d])
+        mine = slice(runs[d], runs[d + 1])
+        von_mises.antithetic_turns(inputs["states"][mine].copy(), inputs["run_start"][mine], inputs["run_stop"][mine],
+                                   inputs["kappa"][a:b], inputs["cos_mu"][a:b], inputs["sin_mu"][a:b],
+                                   cos[turn_first[d]:turn_first[d + 1]].reshape(k, b - a),
+                                   sin[turn_first[d]:turn_first[d + 1]].reshape(k, b - a))
+
+    thread_map(design, first.size - 1)
+    return cos, sin
+
+
+def turns(until: float, toy: bool, cores: int) -> list[dict]:
+    """The copies' turns alone (`turn_inputs`): one GPU launch against the CPU's draws on
+    the `cores` threads, 64 and 1024 paper designs, the cosines compared (rows 1..)."""
+    from numba import cuda
+
+    rows = []
+    for designs in ((1, 2) if toy else (64, 1024)):
+        inputs, drawn = turn_inputs(designs, toy), {}
+        for name in ("cuda", "cpu"):
+            if time.time() > until - 3.0:
+                say(f"out of time before the turns on {name} at {designs} designs")
+                continue
+            times, drawn[name] = timed(partial(draw_turns_of, inputs, name), 3, min(until, time.time() + 8.0),
+                                       sync=cuda.synchronize if name == "cuda" else (lambda: None))
+            median, low, high = spread_of(times)
+            row = {"device": name, "threads": cores, "designs": designs, "repeats": len(times), "median_s": median,
+                   "low_s": low, "high_s": high, "designs_per_s": designs / median}
+            if name == "cpu" and "cuda" in drawn:
+                drawn_rows = np.ones(int(inputs["turn_first"][-1]), dtype=bool)  # row 0 of each design is not drawn
+                for d in range(designs):
+                    drawn_rows[inputs["turn_first"][d]:inputs["turn_first"][d] + inputs["first"][d + 1]
+                               - inputs["first"][d]] = False
+                gap = np.abs(drawn["cuda"][0] - drawn["cpu"][0])[drawn_rows]
+                row["cos_bit_equal_fraction"] = float(np.mean(gap == 0.0))
+                row["max_cos_diff"] = float(gap.max(initial=0.0))
+            rows.append(row)
+            say(f"turns {name:4s} {designs:5d} designs: {median * 1e3:8.1f} ms ({designs / median:9.1f} designs/s)"
+                + (f", cosines equal {row['cos_bit_equal_fraction']:.6f}, max diff {row['max_cos_diff']:.2g}"
+                   if "max_cos_diff" in row else ""))
+    return rows
 
 
 def fly_parts(n: int, parts: int, name: str) -> np.ndarray:
@@ -969,6 +1069,10 @@ def summary(out: Path) -> None:
             elif "flight_compile_and_first_launch_s" in gpu:
                 seconds = num(gpu["flight_compile_and_first_launch_s"])
                 lines.append(f"  flight kernel: compile + first launch {seconds} s")
+            if "turns_compile_error" in gpu:
+                lines.append(f"  turns kernel: no compile ({gpu['turns_compile_error'][:300]})")
+            elif "turns_compile_and_first_launch_s" in gpu:
+                lines.append(f"  turns kernel: compile + first launch {num(gpu['turns_compile_and_first_launch_s'])} s")
             match = gpu.get("match", {}).get("summary")
             if match:
                 lines.append("  GPU vs CPU: " + ", ".join(f"{k}={v}" for k, v in match.items()))
@@ -991,6 +1095,14 @@ def summary(out: Path) -> None:
                          f"{num(r['designs_per_s']):>9s} x{r['repeats']}"
                          + (f"  (landings equal {r['landings_bit_equal']}/{r['granules']}, max diff "
                             f"{r['max_landing_diff_m']} m)" if r.get("max_landing_diff_m") else ""))
+    turned = json.loads(gpu_path.read_text()).get("turns", []) if gpu_path.exists() else []
+    if turned:
+        lines.append("Turns alone (paper designs), designs/s:")
+        for r in turned:
+            lines.append(f"  {r['device']:4s} {r['threads']:>2d} thr {r['designs']:>5d} designs: "
+                         f"{num(r['designs_per_s']):>9s} x{r['repeats']}"
+                         + (f"  (cosines equal {r['cos_bit_equal_fraction']:.6f}, max diff {r['max_cos_diff']:.2g})"
+                            if "max_cos_diff" in r else ""))
     batch = rows_of("gpu_batch.csv")
     if batch:
         lines.append(f"Whole batch of paper designs, {batch[0]['threads']} threads finishing (vector env: steps/s):")

@@ -226,8 +226,9 @@ class DesignConfig(StrictModel):
     scene_overrides: dict[str, Any] = Field(default_factory=dict, description="dotted scene keys")
     model: str = Field(default="auto", description="spinner model (see spreadgym.physics.selection)")
     device: Optional[Literal["cpu", "cuda"]] = Field(
-        default=None, description="where the compiled spinner (and a batch's flights) run: cpu, or cuda (a GPU: "
-                                  "`pip install spreadgym[cuda]`); null: SPREADGYM_DEVICE, else cpu (spreadgym.device)")
+        default=None, description="where the compiled spinner (and a batch's flights and turns) run: cpu, or cuda "
+                                  "(a GPU: `pip install spreadgym[cuda]`); null: SPREADGYM_DEVICE, else cpu "
+                                  "(spreadgym.device)")
     materials: Optional[str] = Field(
         default=None, description="a materials file (configs/materials.yaml's layout) merged over the library, "
                                   "as `--materials`: its fertilizers can be named in context.fertilizers; null: "

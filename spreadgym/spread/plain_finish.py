@@ -18,7 +18,8 @@ whole batch is:
    on which granules fly beside it; tests/spread/test_flight.py);
 3. every design's turns, copies, trays, CV at the target and CV curve in one parallel
    kernel (`finish_kernel.finish_designs`: the same kernels `finish_scene` calls, with the
-   same glue compiled between them);
+   same glue compiled between them); on a GPU the turns are drawn there first, one
+   launch for the batch (`cuda_turns`), and the kernel takes them;
 4. per design, the result's objects and metrics (`pipeline.result_of`).
 
 A design the kernel cannot finish exactly as `finish_scene` does (a feed spot so small
@@ -107,11 +108,12 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
     means = np.empty((len(plans), 6))
     sense = np.array([math.copysign(1.0, scene.spinner.omega_rad_s) for scene in scenes])
     racetrack = np.array([scene.pattern.driving == "racetrack" for scene in scenes])
+    drawn = _turns_on_gpu(numpy_turns, first, copies, runs, laws)
     with threads.numba_threads():
-        finish_designs(numpy_turns, first, copies, *runs, laws.kappa, laws.cos_mu, laws.sin_mu, laws.held, departed,
-                       flown_first, landing_xy, g.mass_kg, g.replicate, replicates, sample_first, out_x, out_mass,
-                       out_replicate, width, min_half, pattern.MAX_TRAYS, tray_first, room, masses_first, out_pooled,
-                       out_masses, target_trays, racetrack, status, half_trays, target, curve,
+        finish_designs(numpy_turns, first, copies, *runs, laws.kappa, laws.cos_mu, laws.sin_mu, laws.held, *drawn,
+                       departed, flown_first, landing_xy, g.mass_kg, g.replicate, replicates, sample_first, out_x,
+                       out_mass, out_replicate, width, min_half, pattern.MAX_TRAYS, tray_first, room, masses_first,
+                       out_pooled, out_masses, target_trays, racetrack, status, half_trays, target, curve,
                        every.departure.position_m, every.departure.velocity_m_s, every.departure.spin_rad_s,
                        every.departure.time_s, sense, means)
     landing_xy += 0.0  # finish_scene adds the disc's centre, 0 here, which turns -0.0 into 0.0: the same bits
@@ -152,6 +154,24 @@ def _tray_room(landing_xy: np.ndarray, flown: np.ndarray, flown_first: np.ndarra
         trays = np.floor(reach / width + 0.5) + 1.0
     trays = np.where(np.isfinite(trays), np.minimum(trays, pattern.MAX_TRAYS), 0.0)  # not finite: binning says so
     return np.minimum(2 * np.maximum(min_half, trays.astype(np.int64)) + 1, pattern.MAX_TRAYS)
+
+
+def _turns_on_gpu(skip: np.ndarray, first: np.ndarray, copies: np.ndarray, runs: tuple,
+                  laws: rotations.TurnLaws) -> tuple:
+    """`finish_designs`' (drawn, turn_first, turn_cos, turn_sin): on a GPU (this thread's
+    device "cuda") the turns of every design but the skipped drawn in one launch
+    (`cuda_turns`); on the CPU none, the kernel draws them."""
+    if device.current() != "cuda":
+        return False, np.zeros(first.size, dtype=np.int64), np.empty(0), np.empty(0)
+    from spreadgym.spread import cuda_turns
+
+    run_first, run_start, run_stop, states = runs
+    run_design = np.repeat(np.arange(first.size - 1), np.diff(run_first))
+    kept = ~skip[run_design]  # a skipped design's turns are numpy's (finish_scene)
+    turn_first = np.concatenate([[0], np.cumsum(copies * np.diff(first))])
+    turn_cos, turn_sin = cuda_turns.draw_turns(states[kept], run_design[kept], run_start[kept], run_stop[kept], first,
+                                               copies, turn_first, laws.kappa, laws.cos_mu, laws.sin_mu)
+    return True, turn_first, turn_cos, turn_sin
 
 
 @lru_cache(maxsize=256)

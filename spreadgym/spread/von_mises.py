@@ -66,29 +66,42 @@ def _draw(state, k, s):
     return w, (-sine if pcg64.next_double(state) < 0.5 else sine)
 
 
+@INLINED
+def turn_run(state, start, stop, kappa, envelope, cos_mu, sin_mu, copies, cos_out, sin_out):
+    """Rows 1..copies - 1 of columns start..stop - 1 of one design's turns: von Mises(mu_j,
+    kappa_j) angles in antithetic pairs mu + phi, mu - phi, drawn from the PCG64 `state`
+    (stepped in place) pair by pair, column by column, as `rng.vonmises(0,
+    broadcast_to(kappa, (copies // 2, columns)))` draws them; rows 1..copies // 2 take
+    mu + phi, the rest mu - phi of the first pairs. `kappa`, `envelope` (filled here for
+    these columns), `cos_mu`, `sin_mu` hold the design's N columns, `cos_out`, `sin_out` its
+    (copies, N) rows flat (copy-major). Row 0 is left alone; every kappa <= LARGE_KAPPA. The
+    CPU's `antithetic_turns` and the GPU's (`cuda_turns`) both draw with it."""
+    n = kappa.size
+    pairs = copies // 2
+    minus = copies - 1 - pairs
+    for j in range(start, stop):
+        envelope[j] = _envelope(kappa[j])
+    for i in range(pairs):
+        for j in range(start, stop):
+            c, s = _draw(state, kappa[j], envelope[j])
+            cm, sm = cos_mu[j], sin_mu[j]
+            plus = (1 + i) * n + j
+            cos_out[plus], sin_out[plus] = cm * c - sm * s, sm * c + cm * s
+            if i < minus:
+                back = (1 + pairs + i) * n + j
+                cos_out[back], sin_out[back] = cm * c + sm * s, sm * c - cm * s
+
+
 @KERNEL
 def antithetic_turns(states, starts, stops, kappa, cos_mu, sin_mu, cos_out, sin_out):
-    """Fill rows 1.. of `cos_out`, `sin_out` (K, N) with the cosines and sines of von
-    Mises(mu_j, kappa_j) angles in antithetic pairs mu + phi, mu - phi, column j of run
-    r (columns starts[r]..stops[r] - 1) drawn from the PCG64 states[r] (`pcg64.seeded`;
-    stepped in place). Per run the phi are drawn pair by pair, column by column, as
-    `rng.vonmises(0, broadcast_to(kappa, (K // 2, columns)))` draws them; rows 1..K//2
-    take mu + phi, the remaining K - 1 - K//2 rows mu - phi of the first pairs. Row 0 is
-    left alone. Every kappa must be <= LARGE_KAPPA (`fill_turns` sees to it)."""
-    pairs = cos_out.shape[0] // 2
-    minus = cos_out.shape[0] - 1 - pairs
+    """Fill rows 1.. of `cos_out`, `sin_out` (K, N; C-contiguous) with the cosines and sines
+    of the turns of N granules (`turn_run`), run r (columns starts[r]..stops[r] - 1) drawn
+    from the PCG64 states[r] (`pcg64.seeded`; stepped in place). Row 0 is left alone."""
+    copies, n = cos_out.shape
+    envelope = np.empty(n)
+    flat_cos, flat_sin = cos_out.reshape(copies * n), sin_out.reshape(copies * n)
     for r in range(starts.size):
-        start, stop = starts[r], stops[r]
-        envelope = np.empty(stop - start)
-        for j in range(start, stop):
-            envelope[j - start] = _envelope(kappa[j])
-        for i in range(pairs):
-            for j in range(start, stop):
-                c, s = _draw(states[r], kappa[j], envelope[j - start])
-                cm, sm = cos_mu[j], sin_mu[j]
-                cos_out[1 + i, j], sin_out[1 + i, j] = cm * c - sm * s, sm * c + cm * s
-                if i < minus:
-                    cos_out[1 + pairs + i, j], sin_out[1 + pairs + i, j] = cm * c + sm * s, sm * c - cm * s
+        turn_run(states[r], starts[r], stops[r], kappa, envelope, cos_mu, sin_mu, copies, flat_cos, flat_sin)
 
 
 def fill_turns(seeds: Sequence[Sequence[int]], starts: np.ndarray, stops: np.ndarray, kappa: np.ndarray,

@@ -31,7 +31,7 @@ def test_an_env_on_a_missing_gpu_fails_at_make_in_one_line():
 def test_workers_share_the_simulated_gpu_with_the_cpu_rewards(cuda_simulator, gpu_launch_log):
     """The vector env's worker processes may share a GPU: two workers on the simulated GPU
     step as one process on the CPU (rewards and observations bit for bit), and each worker
-    launches its own block's spinner and flights on the GPU (logged in the workers)."""
+    launches its own block's spinner, flights and turns on the GPU (logged in the workers)."""
     env, launches = gpu_launch_log
     found = cuda_simulator(
         "import json, os, numpy as np, gymnasium as gym, spreadgym\n"
@@ -48,5 +48,5 @@ def test_workers_share_the_simulated_gpu_with_the_cpu_rewards(cuda_simulator, gp
     assert found["cuda"] == found["cpu"]
     assert len(set(found["cpu"]["reward"])) == 3  # three designs, three rewards: not a constant
     launched = launches()
-    for kind in ("spinner", "flight"):
+    for kind in ("spinner", "flight", "turns"):
         assert len(launched.get(kind, set())) == 2 and found["parent"] not in launched[kind], launched

@@ -145,7 +145,7 @@ print(json.dumps({"parent": os.getpid()}))
 
 def test_compare_workers_share_the_simulated_gpu_with_the_cpu_scores(cuda_simulator, gpu_launch_log, tmp_path):
     """--device cuda with two worker processes scores as one process on the CPU (the same
-    CV, reward and swath for every method), the searches' spinners and flights launched
+    CV, reward and swath for every method), the searches' spinners, flights and turns launched
     on the GPU in the workers (logged there)."""
     env, launches = gpu_launch_log
     found = cuda_simulator(COMPARED, args=(str(tmp_path),), env=env)
@@ -154,5 +154,5 @@ def test_compare_workers_share_the_simulated_gpu_with_the_cpu_scores(cuda_simula
     cpu, gpu = ([{k: row[k] for k in keys} for row in table] for table in tables)
     assert cpu == gpu and len(cpu) == 2
     launched = launches()
-    for kind in ("spinner", "flight"):
+    for kind in ("spinner", "flight", "turns"):
         assert launched.get(kind) and found["parent"] not in launched[kind], launched

@@ -10,7 +10,7 @@ from spreadgym import threads
 from spreadgym.config.scene import MAX_RPM, load_scene
 from spreadgym.errors import ConfigError
 from spreadgym.physics.selection import SPINNER_MODELS
-from spreadgym.spread import pattern, rotations
+from spreadgym.spread import pattern, plain_finish, rotations, von_mises
 from spreadgym.spread.batch import run_batch
 from spreadgym.spread.pipeline import finish_scene, plan_scene, run_scene
 from spreadgym.spread.plain_finish import finish_plain, is_plain
@@ -36,6 +36,36 @@ def test_plain_designs_finish_as_finish_scene_does_bit_for_bit(library, monkeypa
     scenes = [load_scene("paper", {**small, "sim.seed": i, **extra}) for i, extra in enumerate(settings)]
     scenes.append(load_scene("field", {**small, "sim.seed": 40}))
     assert all(is_plain(plan_scene(s, "auto", library)) for s in scenes)
+    for new, old in zip(*_finished_both_ways(scenes, library)):
+        _same(new, old)
+
+
+def _turns_drawn_before(skip, first, copies, runs, laws):
+    """`plain_finish._turns_on_gpu` as a GPU answers it (`cuda_turns.draw_turns`: rows 1..
+    of every design's turns, flat), drawn here on the CPU design by design; row 0 left as
+    garbage and the held granules' columns drawn, which the kernel must write over."""
+    run_first, run_start, run_stop, states = runs
+    turn_first = np.concatenate([[0], np.cumsum(copies * np.diff(first))])
+    cos, sin = np.full(turn_first[-1], 7.0), np.full(turn_first[-1], -7.0)
+    for d in np.flatnonzero(~skip):
+        a, b, k, mine = first[d], first[d + 1], copies[d], slice(run_first[d], run_first[d + 1])
+        block = slice(turn_first[d], turn_first[d + 1])
+        von_mises.antithetic_turns(states[mine].copy(), run_start[mine], run_stop[mine], laws.kappa[a:b],
+                                   laws.cos_mu[a:b], laws.sin_mu[a:b], cos[block].reshape(k, -1),
+                                   sin[block].reshape(k, -1))
+    held = np.flatnonzero(laws.held)
+    assert held.size  # the feed spot at the rim: some release points pulled back by the clip
+    return True, turn_first, cos, sin
+
+
+def test_turns_drawn_before_the_kernel_give_the_same_bits(library, monkeypatch):
+    """The kernel's path for turns a GPU drew (`drawn`) against `finish_scene`: designs of
+    7 and 32 copies, held granules (a feed spot at the rim), a design numpy's turns take."""
+    monkeypatch.setattr(plain_finish, "_turns_on_gpu", _turns_drawn_before)
+    small = {"sim.granules": 384}
+    settings = [{}, {"feed.radius_m": 0.12, "feed.spread_m": 0.03}, {"vanes.pitch_deg": 15.0, "sim.angle_copies": 7},
+                {"sim.replicates": 2, "feed.spread_m": 0.00002}, {"spinner.rpm": 10.0}]
+    scenes = [load_scene("paper", {**small, "sim.seed": i, **extra}) for i, extra in enumerate(settings)]
     for new, old in zip(*_finished_both_ways(scenes, library)):
         _same(new, old)
 
