@@ -46,9 +46,9 @@ cut short still returns what it did):
    - the flight alone (`flight.fly` on "cuda", one launch, against the CPU kernel in parts
      on the 16 threads), 64 and 1024 designs' worth of synthetic launches, the landing
      points compared (gpu_flight.csv);
-   - the copies' turns alone (`cuda_turns.draw_turns`, one launch, against the CPU's
-     draws, designs side by side on the 16 threads), 64 and 1024 paper designs, the
-     cosines compared (gpu.json, "turns");
+   - the copies' turns alone (`cuda_turns.draw_turns`, one launch with its copies, against
+     the CPU's draws, designs side by side on the 16 threads), 32 and 1024 paper designs,
+     the cosines compared (gpu.json, "turns");
    - the spinner stage alone (`model.simulate_compiled_batch`, host<->device copies
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
@@ -72,6 +72,7 @@ import csv
 import json
 import os
 import platform
+import shutil
 import statistics
 import subprocess
 import sys
@@ -636,8 +637,8 @@ def gpu_main(args) -> None:
         with section("flights alone: GPU against CPU", 40) as until:
             flights(Table(out / "gpu_flight.csv"), until, toy, cores)
         with section("the copies' turns alone: GPU against CPU", 30) as until:
-            report["turns"] = turns(until, toy, cores)
-            write_json(out / "gpu.json", report)
+            report["turns"] = []
+            turns(report["turns"], until, toy, cores, lambda: write_json(out / "gpu.json", report))
         with section("spinner stage alone: GPU, CPU 1 and 16 threads", args.spinner_cap_s) as until:
             spinner_stage(spinner, library, until, granules, toy, cores)
     finally:
@@ -786,13 +787,13 @@ def draw_turns_of(inputs: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
     return cos, sin
 
 
-def turns(until: float, toy: bool, cores: int) -> list[dict]:
-    """The copies' turns alone (`turn_inputs`): one GPU launch against the CPU's draws on
-    the `cores` threads, 64 and 1024 paper designs, the cosines compared (rows 1..)."""
+def turns(rows: list, until: float, toy: bool, cores: int, save: Callable[[], None]) -> None:
+    """The copies' turns alone (`turn_inputs`): one GPU launch, its copies included, against
+    the CPU's draws on the `cores` threads, 32 and 1024 paper designs, the cosines compared
+    (rows 1..); each row appended to `rows` and `save`d as it comes."""
     from numba import cuda
 
-    rows = []
-    for designs in ((1, 2) if toy else (64, 1024)):
+    for designs in ((1, 2) if toy else (32, 1024)):  # 32: a part of the vector env's 64-sub-env step
         inputs, drawn = turn_inputs(designs, toy), {}
         for name in ("cuda", "cpu"):
             if time.time() > until - 3.0:
@@ -812,10 +813,10 @@ def turns(until: float, toy: bool, cores: int) -> list[dict]:
                 row["cos_bit_equal_fraction"] = float(np.mean(gap == 0.0))
                 row["max_cos_diff"] = float(gap.max(initial=0.0))
             rows.append(row)
+            save()
             say(f"turns {name:4s} {designs:5d} designs: {median * 1e3:8.1f} ms ({designs / median:9.1f} designs/s)"
                 + (f", cosines equal {row['cos_bit_equal_fraction']:.6f}, max diff {row['max_cos_diff']:.2g}"
                    if "max_cos_diff" in row else ""))
-    return rows
 
 
 def fly_parts(n: int, parts: int, name: str) -> np.ndarray:
@@ -1142,14 +1143,19 @@ def main(argv: Optional[list[str]] = None) -> None:
     CLOCK = Clock(args.t0 or time.time(), args.deadline_s)
     args.batch = args.batch or (24 if args.quick else 256)
     Path(args.out).mkdir(parents=True, exist_ok=True)
-    if args.work is None:
+    made = args.work is None  # a flag folder of its own, removed at the end
+    if made:
         args.work = tempfile.mkdtemp(prefix="device-check-")
     Path(args.work).mkdir(parents=True, exist_ok=True)
     args.out, args.work = str(Path(args.out).resolve()), str(Path(args.work).resolve())
     if args.role == "gpu":
         gpu_main(args)
-    else:
+        return
+    try:
         cpu_main(args)
+    finally:
+        if made:
+            shutil.rmtree(args.work, ignore_errors=True)
 
 
 if __name__ == "__main__":

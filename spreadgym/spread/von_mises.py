@@ -98,6 +98,8 @@ def antithetic_turns(states, starts, stops, kappa, cos_mu, sin_mu, cos_out, sin_
     of the turns of N granules (`turn_run`), run r (columns starts[r]..stops[r] - 1) drawn
     from the PCG64 states[r] (`pcg64.seeded`; stepped in place). Row 0 is left alone."""
     copies, n = cos_out.shape
+    if kappa.size != n:  # turn_run's rows are kappa.size long
+        raise ValueError("antithetic_turns: kappa must have one entry per column of cos_out")
     envelope = np.empty(n)
     flat_cos, flat_sin = cos_out.reshape(copies * n), sin_out.reshape(copies * n)
     for r in range(starts.size):

@@ -53,8 +53,8 @@ def _turns_drawn_before(skip, first, copies, runs, laws):
         von_mises.antithetic_turns(states[mine].copy(), run_start[mine], run_stop[mine], laws.kappa[a:b],
                                    laws.cos_mu[a:b], laws.sin_mu[a:b], cos[block].reshape(k, -1),
                                    sin[block].reshape(k, -1))
-    held = np.flatnonzero(laws.held)
-    assert held.size  # the feed spot at the rim: some release points pulled back by the clip
+    assert laws.held.any()  # the feed spot at the rim: some release points pulled back by the clip
+    states[:] = 0  # spent, as a GPU leaves the host's: a kernel that drew again would not find these turns
     return True, turn_first, cos, sin
 
 

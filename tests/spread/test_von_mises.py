@@ -71,3 +71,10 @@ def test_the_angles_follow_the_von_mises_distribution(kappa):
     result = stats.kstest(angle[1], stats.vonmises(kappa).cdf)
     assert result.pvalue > 1e-3
     assert abs(sin[1].mean()) < 4.0 * sin[1].std() / np.sqrt(sin[1].size)  # symmetric: the sign is drawn
+
+
+def test_a_concentration_per_column_is_required():
+    cos, sin = np.empty((4, 10)), np.empty((4, 10))
+    with pytest.raises(ValueError, match="one entry per column"):
+        von_mises.antithetic_turns(pcg64.seeded([(1,)]), np.array([0]), np.array([9]), np.ones(9), np.ones(9),
+                                   np.zeros(9), cos, sin)
