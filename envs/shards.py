@@ -20,7 +20,9 @@ from __future__ import annotations
 import multiprocessing
 import pickle
 import signal
+import threading
 import traceback
+from contextlib import contextmanager
 from multiprocessing.connection import Connection
 from multiprocessing.reduction import ForkingPickler
 from typing import Any, Optional
@@ -31,6 +33,26 @@ from spreadgym import device, threads
 
 _START = multiprocessing.get_context("spawn")
 _CLOSE_WAIT_S = 10.0  # a worker still running this long after "close" is terminated
+
+
+@contextmanager
+def _ctrl_c_held():
+    """Hold a Ctrl-C (SIGINT) that arrives in the block until its end, then deliver it to
+    the handler that was in place (Python's raises KeyboardInterrupt there). Only the main
+    thread receives signals, so elsewhere, or under a handler set outside Python, this
+    holds nothing."""
+    before = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or before is None:
+        yield
+        return
+    held: list = []
+    signal.signal(signal.SIGINT, lambda number, frame: held.append(number))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
+        if held:
+            signal.raise_signal(signal.SIGINT)
 
 
 def blocks(num_envs: int, workers: int) -> list[tuple[int, int]]:
@@ -67,19 +89,20 @@ class Shards:
     def call(self, name: str, per_block: list[Optional[tuple]]) -> list:
         """Worker w runs `env.<name>(*per_block[w])` (None: w sits this call out); the answers
         in order (None for those that sat out). Every message is pickled before any is sent,
-        and the first worker error is raised once every asked worker has answered, so the
-        pipes stay in step; the answers an interrupted call left (Ctrl-C in this process)
-        are read and dropped first."""
+        a Ctrl-C while they go out is held until all are sent, and the first worker error is
+        raised once every asked worker has answered, so the pipes stay in step; the answers
+        an interrupted call left (Ctrl-C in this process) are read and dropped first."""
         self._drain()
         asked = [w for w, args in enumerate(per_block) if args is not None]
         messages = {w: ForkingPickler.dumps((name, per_block[w])) for w in asked}
         failed: dict[int, BaseException] = {}
-        for w in asked:
-            try:
-                self._pipes[w].send_bytes(messages[w])
-                self._owed.add(w)
-            except OSError:
-                failed[w] = _gone(w)
+        with _ctrl_c_held():  # a message half sent, or sent and not marked owed, would put a pipe out of step
+            for w in asked:
+                try:
+                    self._pipes[w].send_bytes(messages[w])
+                    self._owed.add(w)
+                except OSError:
+                    failed[w] = _gone(w)
         return self._answers(asked, len(per_block), failed)
 
     def _answers(self, asked: list[int], size: int, failed: dict[int, BaseException], starting: bool = False) -> list:

@@ -187,6 +187,43 @@ def test_ctrl_c_leaves_the_workers_running_and_the_pipes_in_step():
         two.close()
 
 
+def test_a_ctrl_c_while_the_actions_go_out_is_held_until_every_worker_has_them():
+    """Ctrl-C arriving as the first worker's message is sent: the second still gets its
+    message and both answers are marked owed before the KeyboardInterrupt, so the next
+    calls drop them and get their own (one process's bits). Without the hold, the second
+    worker's message would not go out and the first's answer would be read as the next
+    call's."""
+    one = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", **SMALL)
+    two = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", workers=2, **SMALL)
+    try:
+        actions = np.array([[0.3, -0.2], [-0.6, 0.1]], dtype=np.float32)
+        for venv in (one, two):
+            venv.reset(seed=9)
+        pipe = two.unwrapped._shards._pipes[0]
+        real = type(pipe).send_bytes
+        sent = []
+
+        def then_ctrl_c(self, message):
+            real(self, message)
+            if self is pipe and not sent:
+                sent.append(1)
+                os.kill(os.getpid(), signal.SIGINT)  # handled between two bytecodes of this process
+
+        type(pipe).send_bytes = then_ctrl_c
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                two.step(actions)
+        finally:
+            type(pipe).send_bytes = real
+        assert sent and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        one.step(actions)  # what the workers did: both blocks stepped
+        _same(one.step(actions), two.step(actions))
+        _same(one.reset(seed=3), two.reset(seed=3))
+    finally:
+        one.close()
+        two.close()
+
+
 def test_the_workers_run_where_this_process_chose(monkeypatch):
     """A spawned worker reads the environment, not this process's `set_device`: it is given the device."""
     from spreadgym import device
