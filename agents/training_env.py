@@ -24,15 +24,13 @@ from spreadgym.agents.run_config import RunConfig
 from spreadgym.errors import SpreadgymError
 
 
-def worker_env(env_id: str, error_dir: Optional[str] = None, threads_each: Optional[int] = None, **env_kwargs):
-    """Make one env; in a worker process, leave Ctrl-C and SIGTERM to the trainer, use
-    `threads_each` threads (None: spreadgym's default), and write any exception's one-line
-    message to `error_dir` before the worker dies, so the trainer can say it (`worker_failure`)."""
+def worker_env(env_id: str, error_dir: Optional[str] = None, **env_kwargs):
+    """Make one env; in a worker process, leave Ctrl-C and SIGTERM to the trainer, and write
+    any exception's one-line message to `error_dir` before the worker dies, so the trainer
+    can say it (`worker_failure`)."""
     if multiprocessing.parent_process() is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    if threads_each is not None:
-        threads.set_threads(threads_each)
     try:
         env = gym.make(env_id, **env_kwargs)
     except Exception as exc:
@@ -105,24 +103,36 @@ WORKER_GONE = (EOFError, BrokenPipeError, ConnectionResetError)  # what SubprocV
 def make_training_env(cfg: RunConfig, error_dir: Optional[str] = None):
     """The vector env of the run (`cfg.vec_env_kind`): spreadgym's batched vector env as an
     SB3 VecEnv (`batched_env`), or SubprocVecEnv for n_envs > 1 (workers record their
-    failures in `error_dir`; spreadgym's threads shared out among them, so that processes
-    and threads do not multiply: one thread each where n_envs exceeds the threads), else
-    DummyVecEnv."""
+    failures in `error_dir`; spreadgym's threads shared out among them by `threads_shared`,
+    so that processes and threads do not multiply: one thread each where n_envs exceeds
+    the threads), else DummyVecEnv."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     if cfg.vec_env_kind == "batched":
         return batched_env(cfg)
     n = cfg.n_envs
-    vec_cls = SubprocVecEnv if n > 1 else DummyVecEnv
-    share = min(threads.shares(n)) if n > 1 else None  # the same for all: SB3 builds them from one factory
+    vec_cls = partial(threads_shared, SubprocVecEnv) if n > 1 else DummyVecEnv
     try:
-        return make_vec_env(partial(worker_env, cfg.env, error_dir if n > 1 else None, share), n_envs=n, seed=cfg.seed,
+        return make_vec_env(partial(worker_env, cfg.env, error_dir if n > 1 else None), n_envs=n, seed=cfg.seed,
                             env_kwargs=cfg.env_kwargs, vec_env_cls=vec_cls)
     except WORKER_GONE:
         if error_dir is None:
             raise
         raise worker_failure(error_dir) from None
+
+
+def threads_shared(vec_cls, env_fns: list, **kwargs):
+    """`vec_cls(env_fns)` with worker i building its env on `threads.shares(len(env_fns))[i]`
+    threads: spreadgym's threads shared out among the workers, all of them used."""
+    shares = threads.shares(len(env_fns))
+    return vec_cls([partial(_on_threads, make, share) for make, share in zip(env_fns, shares)], **kwargs)
+
+
+def _on_threads(make, count: int):
+    """make() in a process that uses `count` of spreadgym's threads."""
+    threads.set_threads(count)
+    return make()
 
 
 def batched_env(cfg: RunConfig):

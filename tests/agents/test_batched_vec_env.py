@@ -12,7 +12,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 from spreadgym.agents.batched_vec_env import BatchedVecEnv, env_infos
 from spreadgym.agents.run_config import default_config_path, read_config, validate_config
-from spreadgym.agents.training_env import worker_env
+from spreadgym.agents.training_env import threads_shared, worker_env
 from spreadgym.errors import ConfigError
 
 DESIGN = "spreadgym/SpinnerDesign-v1"
@@ -71,8 +71,8 @@ def test_the_design_tasks_step_as_in_subprocvecenv_workers():
     """Three envs in two worker processes against SubprocVecEnv's three: every step ends
     an episode, so every step checks terminal_observation and the reset in the same step."""
     kwargs = {"granules": 32}
-    theirs = make_vec_env(partial(worker_env, DESIGN, None, 1), n_envs=3, seed=5, env_kwargs=kwargs,
-                          vec_env_cls=SubprocVecEnv)
+    theirs = make_vec_env(partial(worker_env, DESIGN, None), n_envs=3, seed=5, env_kwargs=kwargs,
+                          vec_env_cls=partial(threads_shared, SubprocVecEnv))  # as train builds them
     ours = BatchedVecEnv(gym.make_vec(DESIGN, num_envs=3, autoreset_mode="same_step", workers=2, **kwargs))
     ours.seed(5)
     try:
@@ -103,7 +103,7 @@ def test_truncated_episodes_keep_their_last_observation_and_say_so():
     """SpreaderTuning's episodes end by the time limit (truncated, not terminated): the
     adapter over gymnasium's own sync vector env against DummyVecEnv of the same env."""
     kwargs = {"granules": 32, "max_steps": 2, "max_episode_steps": 2}
-    theirs = make_vec_env(partial(worker_env, TUNING, None, None), n_envs=2, seed=3, env_kwargs=kwargs,
+    theirs = make_vec_env(partial(worker_env, TUNING, None), n_envs=2, seed=3, env_kwargs=kwargs,
                           vec_env_cls=DummyVecEnv)
     ours = BatchedVecEnv(gym.make_vec(TUNING, num_envs=2, vectorization_mode="sync",
                                       vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kwargs))

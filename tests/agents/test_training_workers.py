@@ -46,23 +46,33 @@ def test_a_worker_that_cannot_build_its_env_ends_train_with_its_message(tmp_path
 
 
 def test_the_workers_share_the_threads_instead_of_each_taking_them_all(monkeypatch):
-    """SubprocVecEnv workers each get thread_count // n_envs threads (processes and threads
-    do not multiply: two workers of two threads each stepped 8 % slower on two cores)."""
-    from stable_baselines3.common import env_util
+    """SubprocVecEnv workers share spreadgym's threads out, all of them (processes and threads
+    do not multiply: two workers of two threads each stepped 8 % slower on two cores); each
+    worker sets its share before it builds its env."""
+    from stable_baselines3.common import env_util, vec_env
 
     from spreadgym import threads
     from spreadgym.agents.run_config import default_config_path, read_config, validate_config
 
     made = []
-    monkeypatch.setattr(env_util, "make_vec_env", lambda factory, **kwargs: made.append(factory))
+    monkeypatch.setattr(env_util, "make_vec_env", lambda factory, **kwargs: made.append(kwargs["vec_env_cls"]))
+    monkeypatch.setattr(vec_env, "SubprocVecEnv", lambda env_fns, **kwargs: env_fns)  # no processes: its env_fns
     monkeypatch.setenv(threads.ENV_VAR, "5")
     cfg = validate_config("ppo", read_config(default_config_path("ppo")), "shipped")
-    for n, share in [(2, 2), (3, 1), (8, 1), (1, None)]:
+    counted = []
+
+    def counts_threads():
+        counted.append(threads.thread_count())
+        return len(counted)
+
+    for n, shares in [(2, [3, 2]), (3, [2, 2, 1]), (8, [1] * 8)]:
         training_env.make_training_env(cfg.replace(n_envs=n, vec_env="subproc"), "errors")
-        assert made[-1].args[2] == share
-    env = training_env.worker_env("spreadgym/SpinnerDesign-v1", None, 2, granules=32)  # what a worker runs first
-    assert threads.thread_count() == 2
-    env.close()
+        counted.clear()
+        fns = made[-1]([counts_threads] * n)  # what make_vec_env does with its ranked env makers
+        assert [fn() for fn in fns] == list(range(1, n + 1)) and counted == shares
+        threads.set_threads(None)  # each worker set its own process's count: here, this one's
+    training_env.make_training_env(cfg.replace(n_envs=1, vec_env="subproc"), "errors")
+    assert made[-1] is vec_env.DummyVecEnv  # one env: in this process, on its threads
 
 
 def test_the_batched_env_takes_one_worker_per_thread_at_most_n_envs(monkeypatch):
