@@ -1088,22 +1088,19 @@ def summary(out: Path) -> None:
                          f"{r['designs']:>5s} designs: {num(r['designs_per_s']):>9s} "
                          f"[{num(float(r['granule_runs_per_s']) / 1e6, 2)}] x{r['repeats']}"
                          + (f"  {schedule} (same bits: {note.rsplit(': ', 1)[-1]})" if schedule else ""))
-    flown = rows_of("gpu_flight.csv")
-    if flown:
-        lines.append("Flights alone (designs of 2048 granules), designs/s:")
-        for r in flown:
-            lines.append(f"  {r['device']:4s} {r['threads']:>2s} thr {r['designs']:>5s} designs: "
-                         f"{num(r['designs_per_s']):>9s} x{r['repeats']}"
-                         + (f"  (landings equal {r['landings_bit_equal']}/{r['granules']}, max diff "
-                            f"{r['max_landing_diff_m']} m)" if r.get("max_landing_diff_m") else ""))
-    turned = json.loads(gpu_path.read_text()).get("turns", []) if gpu_path.exists() else []
-    if turned:
-        lines.append("Turns alone (paper designs), designs/s:")
-        for r in turned:
-            lines.append(f"  {r['device']:4s} {r['threads']:>2d} thr {r['designs']:>5d} designs: "
-                         f"{num(r['designs_per_s']):>9s} x{r['repeats']}"
-                         + (f"  (cosines equal {r['cos_bit_equal_fraction']:.6f}, max diff {r['max_cos_diff']:.2g})"
-                            if "max_cos_diff" in r else ""))
+    def alone(title: str, rows: list[dict], note: Callable[[dict], str]) -> list[str]:
+        """A part timed alone: its title, then designs/s per device and size, each with `note`."""
+        return [title] * bool(rows) + [
+            f"  {r['device']:4s} {str(r['threads']):>2s} thr {str(r['designs']):>5s} designs: "
+            f"{num(r['designs_per_s']):>9s} x{r['repeats']}" + note(r) for r in rows]
+
+    lines += alone("Flights alone (designs of 2048 granules), designs/s:", rows_of("gpu_flight.csv"),
+                   lambda r: f"  (landings equal {r['landings_bit_equal']}/{r['granules']}, max diff "
+                             f"{r['max_landing_diff_m']} m)" if r.get("max_landing_diff_m") else "")
+    lines += alone("Turns alone (paper designs), designs/s:",
+                   json.loads(gpu_path.read_text()).get("turns", []) if gpu_path.exists() else [],
+                   lambda r: f"  (cosines equal {r['cos_bit_equal_fraction']:.6f}, max diff {r['max_cos_diff']:.2g})"
+                             if "max_cos_diff" in r else "")
     batch = rows_of("gpu_batch.csv")
     if batch:
         lines.append(f"Whole batch of paper designs, {batch[0]['threads']} threads finishing (vector env: steps/s):")
