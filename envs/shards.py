@@ -89,9 +89,10 @@ class Shards:
     def call(self, name: str, per_block: list[Optional[tuple]]) -> list:
         """Worker w runs `env.<name>(*per_block[w])` (None: w sits this call out); the answers
         in order (None for those that sat out). Every message is pickled before any is sent,
-        a Ctrl-C while they go out is held until all are sent, and the first worker error is
-        raised once every asked worker has answered, so the pipes stay in step; the answers
-        an interrupted call left (Ctrl-C in this process) are read and dropped first."""
+        a Ctrl-C while they go out is held until all are sent (and one while an answer is
+        read, until it is read: `_received`), and the first worker error is raised once every
+        asked worker has answered, so the pipes stay in step; the answers an interrupted call
+        left (Ctrl-C in this process while it awaited them) are read and dropped first."""
         self._drain()
         asked = [w for w, args in enumerate(per_block) if args is not None]
         messages = {w: ForkingPickler.dumps((name, per_block[w])) for w in asked}
@@ -112,12 +113,12 @@ class Shards:
             if w in failed:
                 continue
             try:
-                raw = self._pipes[w].recv_bytes()  # read apart from unpickling: a bad answer is still read
+                raw = self._received(w)  # read apart from unpickling: a bad answer is still read
             except (EOFError, OSError):
+                self._owed.discard(w)
                 kind, value = "error", _gone(w, self._processes[w] if starting else None)
             else:
                 kind, value = _unpickled(w, raw)
-            self._owed.discard(w)
             if kind == "ok":
                 answers[w] = value
             else:
@@ -126,14 +127,24 @@ class Shards:
             raise failed[min(failed)]
         return answers
 
+    def _received(self, w: int) -> bytes:
+        """Worker w's next answer, read whole. A Ctrl-C while it is awaited abandons the call
+        (the answer stays owed); one that arrives while it is read is held until it is read
+        and no longer owed, since a message half read, or read and still owed, would put
+        the pipe out of step."""
+        self._pipes[w].poll(None)
+        with _ctrl_c_held():
+            raw = self._pipes[w].recv_bytes()
+            self._owed.discard(w)
+        return raw
+
     def _drain(self) -> None:
         """Read and drop the answers an interrupted call left in the pipes."""
         for w in sorted(self._owed):
             try:
-                self._pipes[w].recv_bytes()
+                self._received(w)
             except (EOFError, OSError):
-                pass  # gone: the next message to it says so
-            self._owed.discard(w)
+                self._owed.discard(w)  # gone: the next message to it says so
 
     def close(self) -> None:
         """Stop every worker (closing their sub-envs), waiting _CLOSE_WAIT_S at most. A

@@ -69,8 +69,10 @@ def test_the_workers_share_the_threads_instead_of_each_taking_them_all(monkeypat
         training_env.make_training_env(cfg.replace(n_envs=n, vec_env="subproc"), "errors")
         counted.clear()
         fns = made[-1]([counts_threads] * n)  # what make_vec_env does with its ranked env makers
-        assert [fn() for fn in fns] == list(range(1, n + 1)) and counted == shares
-        threads.set_threads(None)  # each worker set its own process's count: here, this one's
+        try:
+            assert [fn() for fn in fns] == list(range(1, n + 1)) and counted == shares
+        finally:
+            threads.set_threads(None)  # each worker set its own process's count: here, this one's
     training_env.make_training_env(cfg.replace(n_envs=1, vec_env="subproc"), "errors")
     assert made[-1] is vec_env.DummyVecEnv  # one env: in this process, on its threads
 

@@ -187,35 +187,49 @@ def test_ctrl_c_leaves_the_workers_running_and_the_pipes_in_step():
         two.close()
 
 
-def test_a_ctrl_c_while_the_actions_go_out_is_held_until_every_worker_has_them():
-    """Ctrl-C arriving as the first worker's message is sent: the second still gets its
-    message and both answers are marked owed before the KeyboardInterrupt, so the next
-    calls drop them and get their own (one process's bits). Without the hold, the second
-    worker's message would not go out and the first's answer would be read as the next
-    call's."""
+@pytest.fixture
+def _python_ctrl_c():
+    """Python's own SIGINT handler (pytest may start with SIGINT ignored, as a background job does)."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
+@pytest.mark.parametrize("when", ["send", "receive"])
+def test_a_ctrl_c_while_a_message_goes_through_is_held_until_it_is_accounted_for(_python_ctrl_c, when):
+    """Ctrl-C arriving just as worker 0's message is sent (or its answer read): the
+    KeyboardInterrupt comes once every message is out and marked owed (or once that answer
+    is read and no longer owed), so the next calls drop what is left and get their own
+    answers (one process's bits). Without the hold, worker 1's message would not go out and
+    worker 0's answer would be read as the next call's (or worker 0 would stay owed an
+    answer already read, and the next call would wait for it forever)."""
     one = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", **SMALL)
     two = gym.make_vec(ID, num_envs=2, autoreset_mode="same_step", workers=2, **SMALL)
     try:
         actions = np.array([[0.3, -0.2], [-0.6, 0.1]], dtype=np.float32)
         for venv in (one, two):
             venv.reset(seed=9)
-        pipe = two.unwrapped._shards._pipes[0]
-        real = type(pipe).send_bytes
-        sent = []
+        shards_ = two.unwrapped._shards
+        pipe = shards_._pipes[0]
+        name = "send_bytes" if when == "send" else "recv_bytes"
+        real = getattr(type(pipe), name)
+        hit = []
 
-        def then_ctrl_c(self, message):
-            real(self, message)
-            if self is pipe and not sent:
-                sent.append(1)
+        def then_ctrl_c(self, *args):
+            done = real(self, *args)
+            if self is pipe and not hit:
+                hit.append(1)
                 os.kill(os.getpid(), signal.SIGINT)  # handled between two bytecodes of this process
+            return done
 
-        type(pipe).send_bytes = then_ctrl_c
+        setattr(type(pipe), name, then_ctrl_c)
         try:
             with pytest.raises(KeyboardInterrupt):
                 two.step(actions)
         finally:
-            type(pipe).send_bytes = real
-        assert sent and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+            setattr(type(pipe), name, real)
+        assert hit and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        assert shards_._owed == ({0, 1} if when == "send" else {1})
         one.step(actions)  # what the workers did: both blocks stepped
         _same(one.step(actions), two.step(actions))
         _same(one.reset(seed=3), two.reset(seed=3))
