@@ -47,8 +47,8 @@ cut short still returns what it did):
      on the 16 threads), 64 and 1024 designs' worth of synthetic launches, the landing
      points compared (gpu_flight.csv);
    - the copies' turns alone (`cuda_turns.draw_turns`, one launch with its copies, against
-     the CPU's draws, designs side by side on the 16 threads), 32 and 1024 paper designs,
-     the cosines compared (gpu.json, "turns");
+     its CPU twin `von_mises.flat_turns`, runs side by side on the 16 threads), 32 and
+     1024 paper designs, the cosines compared (gpu.json, "turns");
    - the spinner stage alone (`model.simulate_compiled_batch`, host<->device copies
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
@@ -761,35 +761,23 @@ def turn_inputs(designs: int, toy: bool) -> dict:
 
 
 def draw_turns_of(inputs: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """The turns of `turn_inputs` on device `name`: one GPU launch, or on the CPU each
-    design's runs by `von_mises.antithetic_turns`, designs side by side on the threads (as
-    the plain finish's kernel draws them), into the same flat layout."""
+    """The turns of `turn_inputs` on device `name`: one GPU launch (`cuda_turns.draw_turns`),
+    or its CPU twin `von_mises.flat_turns`, runs side by side on the threads."""
+    from spreadgym import threads
+
     if name == "cuda":
         from spreadgym.spread import cuda_turns
 
-        return cuda_turns.draw_turns(**{**inputs, "states": inputs["states"].copy()})
+        return cuda_turns.draw_turns(**inputs)
     from spreadgym.spread import von_mises
-    from spreadgym.threads import thread_map
 
-    first, turn_first, copies = inputs["first"], inputs["turn_first"], inputs["copies"]
-    cos, sin = np.empty(int(turn_first[-1])), np.empty(int(turn_first[-1]))
-    runs = np.concatenate([[0], np.cumsum(np.bincount(inputs["run_design"], minlength=first.size - 1))])
-
-    def design(d: int) -> None:
-        a, b, k = first[d], first[d + 1], int(copies[d])
-        mine = slice(runs[d], runs[d + 1])
-        von_mises.antithetic_turns(inputs["states"][mine].copy(), inputs["run_start"][mine], inputs["run_stop"][mine],
-                                   inputs["kappa"][a:b], inputs["cos_mu"][a:b], inputs["sin_mu"][a:b],
-                                   cos[turn_first[d]:turn_first[d + 1]].reshape(k, b - a),
-                                   sin[turn_first[d]:turn_first[d + 1]].reshape(k, b - a))
-
-    thread_map(design, first.size - 1)
-    return cos, sin
+    with threads.numba_threads():
+        return von_mises.flat_turns(**inputs)
 
 
 def turns(rows: list, until: float, toy: bool, cores: int, save: Callable[[], None]) -> None:
     """The copies' turns alone (`turn_inputs`): one GPU launch, its copies included, against
-    the CPU's draws on the `cores` threads, 32 and 1024 paper designs, the cosines compared
+    its CPU twin on the `cores` threads, 32 and 1024 paper designs, the cosines compared
     (rows 1..); each row appended to `rows` and `save`d as it comes."""
     from numba import cuda
 

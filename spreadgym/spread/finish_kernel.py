@@ -3,11 +3,11 @@ trays and the CV estimate of every design, designs side by side on numba's threa
 
 `finish_designs` runs, for each design, the kernels `pipeline.finish_scene` calls one
 by one with numpy and Python between them: `von_mises.turn_run` (the copies' turns,
-unless a GPU drew them before: `cuda_turns`), `rotations.turned_copies` (where each copy lands across the track),
-`binning.bin_landings` (the trays), `estimate.bout_cvs` (the CV at the target and the
-CV curve) and `departure.means_of` (the departure summary), with the glue between them in
-the same arithmetic, so every figure is the same bits (spreadgym.spread.plain_finish
-holds the rest and the tests).
+unless a GPU drew them before: `cuda_turns`), `rotations.turned_copies` (where each copy
+lands across the track), `binning.bin_landings` (the trays), `estimate.bout_cvs` (the CV
+at the target and the CV curve) and `departure.means_of` (the departure summary), with
+the glue between them in the same arithmetic, so every figure is the same bits
+(spreadgym.spread.plain_finish holds the rest and the tests).
 
 The outputs are flat arrays, each design's part at offsets the caller gives: the copies'
 sample (`sample_first`), the trays (`tray_first`: room for `tray_room` trays, at least

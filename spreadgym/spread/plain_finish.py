@@ -159,18 +159,26 @@ def _tray_room(landing_xy: np.ndarray, flown: np.ndarray, flown_first: np.ndarra
 def _turns_on_gpu(skip: np.ndarray, first: np.ndarray, copies: np.ndarray, runs: tuple,
                   laws: rotations.TurnLaws) -> tuple:
     """`finish_designs`' (drawn, turn_first, turn_cos, turn_sin): on a GPU (this thread's
-    device "cuda") the turns of every design but the skipped drawn in one launch
-    (`cuda_turns`); on the CPU none, the kernel draws them."""
+    device "cuda") the turns drawn there in one launch (`drawn_turns` by `cuda_turns`); on
+    the CPU none, the kernel draws them."""
     if device.current() != "cuda":
         return False, np.zeros(first.size, dtype=np.int64), np.empty(0), np.empty(0)
     from spreadgym.spread import cuda_turns
 
+    return drawn_turns(cuda_turns.draw_turns, skip, first, copies, runs, laws)
+
+
+def drawn_turns(draw, skip: np.ndarray, first: np.ndarray, copies: np.ndarray, runs: tuple,
+                laws: rotations.TurnLaws) -> tuple:
+    """`finish_designs`' (True, turn_first, turn_cos, turn_sin) with the turns of every design
+    but the skipped (whose turns numpy draws: `finish_scene`) drawn before the kernel by
+    `draw` (`cuda_turns.draw_turns`, or its CPU twin `von_mises.flat_turns`)."""
     run_first, run_start, run_stop, states = runs
     run_design = np.repeat(np.arange(first.size - 1), np.diff(run_first))
-    kept = ~skip[run_design]  # a skipped design's turns are numpy's (finish_scene)
+    kept = ~skip[run_design]
     turn_first = np.concatenate([[0], np.cumsum(copies * np.diff(first))])
-    turn_cos, turn_sin = cuda_turns.draw_turns(states[kept], run_design[kept], run_start[kept], run_stop[kept], first,
-                                               copies, turn_first, laws.kappa, laws.cos_mu, laws.sin_mu)
+    turn_cos, turn_sin = draw(states[kept], run_design[kept], run_start[kept], run_stop[kept], first, copies,
+                              turn_first, laws.kappa, laws.cos_mu, laws.sin_mu)
     return True, turn_first, turn_cos, turn_sin
 
 

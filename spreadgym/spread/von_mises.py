@@ -26,9 +26,10 @@ import math
 from typing import Sequence
 
 import numpy as np
+from numba import prange
 
 from spreadgym.physics.compiled import pcg64
-from spreadgym.physics.compiled.options import INLINED, KERNEL
+from spreadgym.physics.compiled.options import INLINED, KERNEL, PARALLEL
 
 SMALL_KAPPA = 1e-8  # below: the angle is uniform on (-pi, pi) (numpy's limit)
 LARGE_KAPPA = 1e6  # above: the angle is normal with variance 1/kappa (numpy's limit)
@@ -75,7 +76,7 @@ def turn_run(state, start, stop, kappa, envelope, cos_mu, sin_mu, copies, cos_ou
     mu + phi, the rest mu - phi of the first pairs. `kappa`, `envelope` (filled here for
     these columns), `cos_mu`, `sin_mu` hold the design's N columns, `cos_out`, `sin_out` its
     (copies, N) rows flat (copy-major). Row 0 is left alone; every kappa <= LARGE_KAPPA. The
-    CPU's `antithetic_turns` and the GPU's (`cuda_turns`) both draw with it."""
+    CPU's `antithetic_turns`, the plain finish's kernel and `batch_run` (the GPU's) draw with it."""
     n = kappa.size
     pairs = copies // 2
     minus = copies - 1 - pairs
@@ -104,6 +105,43 @@ def antithetic_turns(states, starts, stops, kappa, cos_mu, sin_mu, cos_out, sin_
     flat_cos, flat_sin = cos_out.reshape(copies * n), sin_out.reshape(copies * n)
     for r in range(starts.size):
         turn_run(states[r], starts[r], stops[r], kappa, envelope, cos_mu, sin_mu, copies, flat_cos, flat_sin)
+
+
+@INLINED
+def batch_run(r, state, run_design, run_start, run_stop, first, copies, turn_first, kappa, envelope, cos_mu, sin_mu,
+              turn_cos, turn_sin):
+    """Run r of a batch's turns, drawn before the finish (`flat_turns`, `cuda_turns`): columns
+    run_start[r]..run_stop[r] - 1 of design d = run_design[r] (granule columns first[d]..
+    first[d + 1] - 1 of `kappa`, `cos_mu`, `sin_mu`, and of the `envelope` scratch) from the
+    PCG64 `state` (stepped in place), into rows 1.. of the design's (copies[d], granules)
+    block of the flat `turn_cos`, `turn_sin` (from turn_first[d]): `turn_run`."""
+    d = run_design[r]
+    a, b, t0, t1 = first[d], first[d + 1], turn_first[d], turn_first[d + 1]
+    turn_run(state, run_start[r], run_stop[r], kappa[a:b], envelope[a:b], cos_mu[a:b], sin_mu[a:b], copies[d],
+             turn_cos[t0:t1], turn_sin[t0:t1])
+
+
+@PARALLEL
+def _flat_turns(states, run_design, run_start, run_stop, first, copies, turn_first, kappa, cos_mu, sin_mu, turn_cos,
+                turn_sin):
+    envelope = np.empty(kappa.size)
+    for r in prange(run_start.size):
+        batch_run(r, states[r].copy(), run_design, run_start, run_stop, first, copies, turn_first, kappa, envelope,
+                  cos_mu, sin_mu, turn_cos, turn_sin)
+
+
+def flat_turns(states: np.ndarray, run_design: np.ndarray, run_start: np.ndarray, run_stop: np.ndarray,
+               first: np.ndarray, copies: np.ndarray, turn_first: np.ndarray, kappa: np.ndarray, cos_mu: np.ndarray,
+               sin_mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`cuda_turns.draw_turns` on the CPU, runs side by side on numba's threads (callers hold
+    `threads.numba_threads()`): the same arguments, layout and bits, each run from a copy of
+    its state (the given states are left as they are); rows 0, and blocks of designs
+    without runs, left unwritten. The GPU's reference (the device check, the tests); the
+    plain finish draws on the CPU inside its own kernel instead."""
+    turn_cos, turn_sin = np.empty(int(turn_first[-1])), np.empty(int(turn_first[-1]))
+    _flat_turns(states, run_design, run_start, run_stop, first, copies, turn_first, kappa, cos_mu, sin_mu, turn_cos,
+                turn_sin)
+    return turn_cos, turn_sin
 
 
 def fill_turns(seeds: Sequence[Sequence[int]], starts: np.ndarray, stops: np.ndarray, kappa: np.ndarray,

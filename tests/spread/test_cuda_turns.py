@@ -1,5 +1,6 @@
 """The copies' turns on a CUDA GPU (spreadgym.spread.cuda_turns) under numba's CUDA
-simulator, against the CPU's `von_mises.antithetic_turns`: every cosine and sine to the
+simulator, against the CPU's `von_mises.antithetic_turns` design by design and against
+the launch's CPU twin `von_mises.flat_turns`: every cosine and sine to the
 bit (the simulator runs the CPU's scalar code; a real GPU's cosine and logarithm may
 differ in the last bits). The whole finish with GPU turns is held to the CPU's by
 tests/physics/test_cuda_spinner.py and tests/envs/test_env_device.py."""
@@ -24,8 +25,11 @@ for d, (_, _, bounds) in enumerate(designs):
     for a, b in zip(bounds[:-1], bounds[1:]):
         run_design.append(d); run_start.append(a); run_stop.append(b); seeds.append((d, a, 7))
 run_design, run_start, run_stop = (np.array(v, dtype=np.int64) for v in (run_design, run_start, run_stop))
-cos, sin = cuda_turns.draw_turns(pcg64.seeded(seeds), run_design, run_start, run_stop, first, copies, turn_first,
-                                 kappa, np.cos(mu), np.sin(mu))
+states = pcg64.seeded(seeds)
+given = (states, run_design, run_start, run_stop, first, copies, turn_first, kappa, np.cos(mu), np.sin(mu))
+cos, sin = cuda_turns.draw_turns(*given)
+twin_cos, twin_sin = von_mises.flat_turns(*given)  # the CPU's twin of the launch
+kept = bool(np.array_equal(states, pcg64.seeded(seeds)))  # both leave the host's states as they are
 rows = []
 for d, (n, k, bounds) in enumerate(designs):
     if not bounds:
@@ -37,13 +41,16 @@ for d, (n, k, bounds) in enumerate(designs):
                                kappa[a:b], np.cos(mu[a:b]), np.sin(mu[a:b]), cpu_cos, cpu_sin)
     gpu_cos = cos[turn_first[d]:turn_first[d + 1]].reshape(k, n)
     gpu_sin = sin[turn_first[d]:turn_first[d + 1]].reshape(k, n)
+    twin = slice(turn_first[d] + n, turn_first[d + 1])  # rows 1..
     rows.append({"design": d, "cos_equal": bool(np.array_equal(gpu_cos[1:], cpu_cos[1:])),
                  "sin_equal": bool(np.array_equal(gpu_sin[1:], cpu_sin[1:])),
+                 "twin_equal": bool(np.array_equal(cos[twin], twin_cos[twin])
+                                    and np.array_equal(sin[twin], twin_sin[twin])),
                  "unit": float(np.abs(gpu_cos[1:]**2 + gpu_sin[1:]**2 - 1).max()),
                  "distinct": int(np.unique(gpu_cos[1:]).size)})
 none = cuda_turns.draw_turns(np.empty((0, 6), dtype=np.uint64), run_design[:0], run_start[:0], run_stop[:0], first,
                              copies, turn_first, kappa, mu, mu)
-print(json.dumps({"rows": rows, "size": int(cos.size), "empty": [a.size for a in none]}))
+print(json.dumps({"rows": rows, "size": int(cos.size), "empty": [a.size for a in none], "states_kept": kept}))
 """
 
 
@@ -51,7 +58,8 @@ def test_the_gpu_draws_every_run_s_turns_as_the_cpu_does(cuda_simulator):
     found = cuda_simulator(DRAWN)
     assert [row["design"] for row in found["rows"]] == [0, 1, 3]
     for row in found["rows"]:
-        assert row["cos_equal"] and row["sin_equal"], row
+        assert row["cos_equal"] and row["sin_equal"] and row["twin_equal"], row
         assert row["unit"] < 1e-15 and row["distinct"] > 5, row  # real turns, not a constant
     assert found["size"] == 13 * 8 + 9 * 7 + 6 * 4 + 11 * 2
     assert found["empty"] == [found["size"]] * 2  # no runs: nothing launched, the blocks returned unwritten
+    assert found["states_kept"]

@@ -41,21 +41,16 @@ def test_plain_designs_finish_as_finish_scene_does_bit_for_bit(library, monkeypa
 
 
 def _turns_drawn_before(skip, first, copies, runs, laws):
-    """`plain_finish._turns_on_gpu` as a GPU answers it (`cuda_turns.draw_turns`: rows 1..
-    of every design's turns, flat), drawn here on the CPU design by design; row 0 left as
-    garbage and the held granules' columns drawn, which the kernel must write over."""
-    run_first, run_start, run_stop, states = runs
-    turn_first = np.concatenate([[0], np.cumsum(copies * np.diff(first))])
-    cos, sin = np.full(turn_first[-1], 7.0), np.full(turn_first[-1], -7.0)
-    for d in np.flatnonzero(~skip):
-        a, b, k, mine = first[d], first[d + 1], copies[d], slice(run_first[d], run_first[d + 1])
-        block = slice(turn_first[d], turn_first[d + 1])
-        von_mises.antithetic_turns(states[mine].copy(), run_start[mine], run_stop[mine], laws.kappa[a:b],
-                                   laws.cos_mu[a:b], laws.sin_mu[a:b], cos[block].reshape(k, -1),
-                                   sin[block].reshape(k, -1))
+    """`plain_finish._turns_on_gpu` as a GPU answers it, drawn on the CPU by the GPU's twin
+    (`von_mises.flat_turns`); each block's row 0 then made garbage and the held granules'
+    columns left drawn, both of which the kernel must write over."""
+    drawn, turn_first, cos, sin = plain_finish.drawn_turns(von_mises.flat_turns, skip, first, copies, runs, laws)
+    for d in range(first.size - 1):
+        cos[turn_first[d]:turn_first[d] + first[d + 1] - first[d]] = 7.0
+        sin[turn_first[d]:turn_first[d] + first[d + 1] - first[d]] = -7.0
     assert laws.held.any()  # the feed spot at the rim: some release points pulled back by the clip
-    states[:] = 0  # spent, as a GPU leaves the host's: a kernel that drew again would not find these turns
-    return True, turn_first, cos, sin
+    runs[3][:] = 0  # the states spent, as a GPU leaves the host's: a kernel that drew again would not find these turns
+    return drawn, turn_first, cos, sin
 
 
 def test_turns_drawn_before_the_kernel_give_the_same_bits(library, monkeypatch):
