@@ -736,7 +736,7 @@ def flights(table: Table, until: float, toy: bool, cores: int) -> None:
 
 
 def turn_inputs(designs: int, toy: bool) -> dict:
-    """`cuda_turns.draw_turns`' arguments for `designs` paper designs: one paper design's
+    """`plain_finish.drawn_turns`' arguments for `designs` paper designs: one paper design's
     granules (2048 in 8 replicates; 16 in 2 when `toy`) and the laws of their turns
     (`rotations.TurnLaws`), repeated, each design's replicates on streams of their own."""
     from spreadgym.config.materials import load_library
@@ -747,32 +747,32 @@ def turn_inputs(designs: int, toy: bool) -> dict:
 
     paper = load_scene("paper", {"sim.granules": 16, "sim.replicates": 2} if toy else {})
     one = sample_granules(paper, load_library().fertilizer_of(paper))
-    laws = rotations.TurnLaws.of(one.release_xy_m, [paper], [one.count])
-    copies = rotations.copies_for(paper)[0]
     first = np.arange(designs + 1) * one.count
     run_first, run_start, run_stop, streams = rotations.turn_streams(
         np.tile(one.replicate, designs), first, list(range(designs)), [0] * designs)
-    return {"states": pcg64.seeded(streams), "run_design": np.repeat(np.arange(designs), np.diff(run_first)),
-            "run_start": run_start, "run_stop": run_stop, "first": first,
-            "copies": np.full(designs, copies, dtype=np.int64),
-            "turn_first": np.arange(designs + 1) * copies * one.count,
-            "kappa": np.tile(laws.kappa, designs), "cos_mu": np.tile(laws.cos_mu, designs),
-            "sin_mu": np.tile(laws.sin_mu, designs)}
+    return {"skip": np.zeros(designs, dtype=bool), "first": first,
+            "copies": np.full(designs, rotations.copies_for(paper)[0], dtype=np.int64),
+            "runs": (run_first, run_start, run_stop, pcg64.seeded(streams)),
+            "laws": rotations.TurnLaws.of(np.tile(one.release_xy_m, (designs, 1)), [paper] * designs,
+                                          [one.count] * designs)}
 
 
-def draw_turns_of(inputs: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """The turns of `turn_inputs` on device `name`: one GPU launch (`cuda_turns.draw_turns`),
-    or its CPU twin `von_mises.flat_turns`, runs side by side on the threads."""
+def draw_turns_of(inputs: dict, name: str) -> tuple:
+    """The turns of `turn_inputs` as the plain finish asks for them (`plain_finish.drawn_turns`:
+    drawn, turn_first, cosines, sines) on device `name`: one GPU launch
+    (`cuda_turns.draw_turns`), or its CPU twin `von_mises.flat_turns`, runs side by side on
+    the threads."""
     from spreadgym import threads
+    from spreadgym.spread.plain_finish import drawn_turns
 
     if name == "cuda":
         from spreadgym.spread import cuda_turns
 
-        return cuda_turns.draw_turns(**inputs)
+        return drawn_turns(cuda_turns.draw_turns, **inputs)
     from spreadgym.spread import von_mises
 
     with threads.numba_threads():
-        return von_mises.flat_turns(**inputs)
+        return drawn_turns(von_mises.flat_turns, **inputs)
 
 
 def turns(rows: list, until: float, toy: bool, cores: int, save: Callable[[], None]) -> None:
@@ -793,11 +793,11 @@ def turns(rows: list, until: float, toy: bool, cores: int, save: Callable[[], No
             row = {"device": name, "threads": cores, "designs": designs, "repeats": len(times), "median_s": median,
                    "low_s": low, "high_s": high, "designs_per_s": designs / median}
             if name == "cpu" and "cuda" in drawn:
-                drawn_rows = np.ones(int(inputs["turn_first"][-1]), dtype=bool)  # row 0 of each design is not drawn
+                _, turn_first, cos, _ = drawn["cpu"]
+                drawn_rows = np.ones(cos.size, dtype=bool)  # row 0 of each design is not drawn
                 for d in range(designs):
-                    drawn_rows[inputs["turn_first"][d]:inputs["turn_first"][d] + inputs["first"][d + 1]
-                               - inputs["first"][d]] = False
-                gap = np.abs(drawn["cuda"][0] - drawn["cpu"][0])[drawn_rows]
+                    drawn_rows[turn_first[d]:turn_first[d] + inputs["first"][d + 1] - inputs["first"][d]] = False
+                gap = np.abs(drawn["cuda"][2] - cos)[drawn_rows]
                 row["cos_bit_equal_fraction"] = float(np.mean(gap == 0.0))
                 row["max_cos_diff"] = float(gap.max(initial=0.0))
             rows.append(row)
