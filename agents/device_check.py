@@ -391,15 +391,16 @@ def cpu_main(args) -> None:
         with section("versions", 30):
             env = versions(out)
         scaling, stages = Table(out / "cpu_scaling.csv"), Table(out / "cpu_stages.csv")
-        counts = thread_counts(args.quick, args.threads)
+        counts = [] if args.gpu_only else thread_counts(args.quick, args.threads)
         library = load_library()
         scenes, papers = mixed_scenes(args.batch), paper_designs(args.batch)
         with section("CPU warm-up (numba's first compile, or its cache)", 240):
-            threads.set_threads(counts[-1])
+            threads.set_threads(counts[-1] if counts else None)
             started = time.perf_counter()
             run_batch(mixed_scenes(3, granules=64), library=library, ci=False)
-            venv = vector_env(args.batch)
-            venv.reset(seed=0)
+            if counts:
+                venv = vector_env(args.batch)
+                venv.reset(seed=0)
             env["cpu_warm_s"] = time.perf_counter() - started
             say(f"warm in {env['cpu_warm_s']:.1f} s")
             import numba
@@ -409,6 +410,8 @@ def cpu_main(args) -> None:
             write_json(out / "env.json", env)
 
         reference: dict = {}
+        if not counts:
+            say("--gpu-only: no CPU scaling series")
         with section(f"CPU scaling at {counts} threads: run_batch of {args.batch} mixed scenes and the vector env "
                      f"({args.batch} sub-envs), then run_batch's stages on {args.batch} paper designs",
                      args.cpu_cap_s) as until:
@@ -1110,6 +1113,8 @@ def main(argv: Optional[list[str]] = None) -> None:
     parser.add_argument("--work", default=None, help="folder for the two processes' flag files")
     parser.add_argument("--quick", action="store_true", help="small sizes, two thread counts: a dry run")
     parser.add_argument("--gpu-sim", action="store_true", help="the GPU section on numba's CUDA simulator, toy sizes")
+    parser.add_argument("--gpu-only", action="store_true",
+                        help="skip the CPU scaling series (a second call on a machine already measured)")
     parser.add_argument("--batch", type=int, default=None, help="designs per CPU block (default 256; quick 24)")
     parser.add_argument("--repeats", type=int, default=3, help="timed blocks after the warm-up")
     parser.add_argument("--threads", type=thread_list, default=None,

@@ -7,6 +7,10 @@
 # network, prints the versions and the GPUs, then runs the driver; everything goes to
 # $OUT (the device tool's folder; default out/device-check), device_check.log included.
 # PYTHON (default python3), SITE and LIMIT (the driver's hard stop, s; default 450) can be set.
+# A SITE that already holds spreadgym is used as it is, its driver refreshed (a second call on the same warm machine keeps
+# its compiled kernels: reinstalling would renew the sources' times and so drop numba's caches).
+# MPS=1 runs the driver under NVIDIA's Multi-Process Service (started here, stopped at the end),
+# so that the GPU launches of the vector env's worker processes may overlap.
 set -u
 export PYTHONUNBUFFERED=1
 PY=${PYTHON:-python3}
@@ -16,12 +20,17 @@ mkdir -p "$OUT"
 start=$(date +%s)
 {
   mkdir -p "$SITE/lib"
-  if [ -d .whl ]; then
+  if [ -d "$SITE/spreadgym" ]; then  # the driver itself is no kernel source: refreshed
+    cp agents/device_check.py "$SITE/spreadgym/agents/device_check.py"
+    echo "$SITE already holds spreadgym: used as it is (the driver refreshed)"
+  elif [ -d .whl ]; then
     $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" .whl/*.whl \
       || echo "!! wheel install failed"
   fi
   # the repository as pyproject maps it (envs/ -> spreadgym.envs, agents/ -> spreadgym.agents, configs/ -> spreadgym.configs)
-  if ! $PY -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --no-cache-dir --upgrade \
+  if [ -d "$SITE/spreadgym" ]; then
+    :
+  elif ! $PY -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --no-cache-dir --upgrade \
       --target "$SITE" . ; then
     echo "!! pip could not install the repository: copying its packages into $SITE instead"
     rm -rf "$SITE/spreadgym" && cp -r spreadgym "$SITE/" && cp -r envs "$SITE/spreadgym/envs" \
@@ -50,7 +59,17 @@ with zipfile.ZipFile(sys.argv[1]) as z:
   nvidia-smi --query-gpu=compute_mode --format=csv,noheader 2>/dev/null | sed 's/^/compute mode: /'
   if pgrep -x nvidia-cuda-mps-control > /dev/null 2>&1; then echo "MPS: running"; else echo "MPS: not running"; fi
   echo "libnvvm: $(ls /usr/local/cuda*/nvvm/lib64/libnvvm.so* 2>/dev/null | head -2 | tr '\n' ' ')"
+  echo "MPS control: $(command -v nvidia-cuda-mps-control || echo none)"
+  if [ "${MPS:-0}" = 1 ]; then
+    export CUDA_MPS_PIPE_DIRECTORY=$SITE/mps-pipe CUDA_MPS_LOG_DIRECTORY=$SITE/mps-log
+    mkdir -p "$CUDA_MPS_PIPE_DIRECTORY" "$CUDA_MPS_LOG_DIRECTORY"
+    if nvidia-cuda-mps-control -d; then mps=1; echo "MPS: started"; else echo "!! MPS did not start"; fi
+  fi
   timeout -k 15 "${LIMIT:-450}" $PY -P -m spreadgym.agents.device_check --out "$OUT" "$@"
   rc=$?
+  if [ "${mps:-0}" = 1 ]; then
+    echo quit | nvidia-cuda-mps-control && echo "MPS: stopped"
+    tail -5 "$CUDA_MPS_LOG_DIRECTORY"/control.log 2>/dev/null
+  fi
   echo "device_check.sh: $(( $(date +%s) - start )) s in all (driver exit $rc)"
 } 2>&1 | tee "$OUT/device_check.log"
