@@ -33,7 +33,7 @@ cut short still returns what it did):
    the 16-thread series wait for the compile to end first (at most `--compile-wait-s`;
    each row says whether the compile was still running), and the GPU process waits for
    the CPU series to end before it times anything, so no other timing shares the machine
-   with the other process's work. Then (gpu.json, gpu_spinner.csv, gpu_flight.csv, gpu_batch.csv):
+   with the other process's work. Then (gpu.json, gpu_spinner.csv, gpu_batch.csv):
    - CPU against GPU on one batch (paper at 2048 granules, varied rpm and seeds, plus
      twin-field and field scenes): outcome counts per design, tray masses, CV at the
      target, departure speeds;
@@ -43,12 +43,6 @@ cut short still returns what it did):
    - the spinner kernel alone under three schedules (the shipped queue of granules handed
      out longest first, the queue in launch order, one granule per thread), at 1024 and
      4096 designs, their outputs compared to the bit;
-   - the flight alone (`flight.fly` on "cuda", one launch, against the CPU kernel in parts
-     on the 16 threads), 64 and 1024 designs' worth of synthetic launches, the landing
-     points compared (gpu_flight.csv);
-   - the copies' turns alone (`cuda_turns.draw_turns`, one launch with its copies, against
-     its CPU twin `von_mises.flat_turns`, runs side by side on the 16 threads), 32 and
-     1024 paper designs, the cosines compared (gpu.json, "turns");
    - the spinner stage alone (`model.simulate_compiled_batch`, host<->device copies
      included) on the GPU and on the CPU at 1 and 16 threads, 64-4096 paper designs (512
      planned designs repeated in turn; a CPU call guessed over 20 s is skipped), with the
@@ -61,8 +55,7 @@ it to the GPU). Without a GPU the GPU section says so and stops. `--quick` shrin
 sections for a dry run on a small machine (24 designs, two thread counts); `--gpu-sim`
 runs the GPU section on numba's CUDA simulator at toy sizes (a check of this script, not
 a timing). At most 8 files come back: env.json, cpu_scaling.csv, cpu_stages.csv,
-gpu.json, gpu_spinner.csv, gpu_flight.csv, gpu_batch.csv and the shell script's
-device_check.log.
+gpu.json, gpu_spinner.csv, gpu_batch.csv and the shell script's device_check.log.
 """
 
 from __future__ import annotations
@@ -566,8 +559,7 @@ def gpu_main(args) -> None:
             say("no CUDA GPU here (numba.cuda sees none): GPU sections skipped")
             report["skipped"] = "no CUDA GPU found by numba.cuda"
             return
-        with section("CUDA compile of the spinner, flight and turns kernels (a small paper batch, 64 flights, "
-                     "one design's turns)", 420):
+        with section("CUDA compile of the spinner kernel (a small paper batch)", 420):
             from numba import cuda
 
             try:
@@ -597,24 +589,6 @@ def gpu_main(args) -> None:
             report["second_launch_s"] = time.perf_counter() - started
             say(f"compiled and launched in {report['compile_and_first_launch_s']:.1f} s; "
                 f"again in {report['second_launch_s'] * 1e3:.1f} ms")
-            started = time.perf_counter()
-            try:
-                fly_parts(64, 1, "cuda")
-            except Exception as error:  # as the spinner's: the whole traceback; sections that fly on cuda then fail
-                report["flight_compile_error"] = f"{type(error).__name__}: {error}"[:4000]
-                print(traceback.format_exc()[-4000:], flush=True)
-                raise
-            report["flight_compile_and_first_launch_s"] = time.perf_counter() - started
-            say(f"flight kernel compiled and launched in {report['flight_compile_and_first_launch_s']:.1f} s")
-            started = time.perf_counter()
-            try:
-                draw_turns_of(turn_inputs(1, toy), "cuda")
-            except Exception as error:  # as the flight's
-                report["turns_compile_error"] = f"{type(error).__name__}: {error}"[:4000]
-                print(traceback.format_exc()[-4000:], flush=True)
-                raise
-            report["turns_compile_and_first_launch_s"] = time.perf_counter() - started
-            say(f"turns kernel compiled and launched in {report['turns_compile_and_first_launch_s']:.1f} s")
     finally:
         write_json(out / "gpu.json", report)
         (work / "compiled").write_text(json.dumps(report, default=str))
@@ -630,18 +604,13 @@ def gpu_main(args) -> None:
         with section("GPU against CPU on one batch", 60):
             report["match"] = compare_devices(library, granules, toy)
             write_json(out / "gpu.json", report)
-        # in the order of what is least known: the GPU target's own figure (the vector env, now with workers and
-        # the flights on the GPU), the queue's schedule, the flights alone, then the spinner stage measured before
+        # in the order of what is least known: the GPU target's own figure (the vector env, with workers), the
+        # queue's schedule, then the spinner stage
         with section("the vector env and run_batch, cuda against cpu", args.batch_cap_s) as until:
             whole_batches(Table(out / "gpu_batch.csv"), library, until, granules, toy, cores)
         spinner = Table(out / "gpu_spinner.csv")
         with section("GPU schedules of the spinner kernel", 60) as until:
             schedules(spinner, library, until, granules, toy, cores)
-        with section("flights alone: GPU against CPU", 40) as until:
-            flights(Table(out / "gpu_flight.csv"), until, toy, cores)
-        with section("the copies' turns alone: GPU against CPU", 30) as until:
-            report["turns"] = []
-            turns(report["turns"], until, toy, cores, lambda: write_json(out / "gpu.json", report))
         with section("spinner stage alone: GPU, CPU 1 and 16 threads", args.spinner_cap_s) as until:
             spinner_stage(spinner, library, until, granules, toy, cores)
     finally:
@@ -696,136 +665,6 @@ def compare_devices(library, granules: Optional[int], toy: bool) -> dict:
     }
     say("match: " + ", ".join(f"{k} {v}" for k, v in summary.items()))
     return {"summary": summary, "per_design": rows}
-
-
-def launches(n: int, seed: int = 0):
-    """(position, height, velocity, diameter) of n synthetic launches like a paper spinner's:
-    0.15 m from the axis, 0.8 m up, 18-32 m/s outwards, 2-4 mm granules (SI units)."""
-    rng = np.random.default_rng(seed)
-    angle = rng.uniform(0.0, 2.0 * np.pi, n)
-    out = np.c_[np.cos(angle), np.sin(angle)]
-    speed = rng.uniform(18.0, 32.0, n)
-    velocity = np.c_[out * speed[:, None], rng.normal(0.0, 1.0, n)]
-    return 0.15 * out, np.full(n, 0.8), velocity, rng.uniform(2e-3, 4e-3, n)
-
-
-def flights(table: Table, until: float, toy: bool, cores: int) -> None:
-    """The flight alone: one GPU launch (`cuda_flight`) against the CPU kernel in 4 x `cores`
-    parts on the threads (as the plain finish runs it), 64 and 1024 designs' worth of
-    granules (2048 each), the landing points compared."""
-    from numba import cuda
-
-    for designs in ((1, 2) if toy else (64, 1024)):
-        n = designs * (40 if toy else 2048)
-        flown = {}
-        for name in ("cuda", "cpu"):
-            if time.time() > until - 3.0:
-                say(f"out of time before the flights on {name} at {designs} designs")
-                continue
-            times, flown[name] = timed(partial(fly_parts, n, 1 if name == "cuda" else 4 * cores, name), 3,
-                                       min(until, time.time() + 10.0),
-                                       sync=cuda.synchronize if name == "cuda" else (lambda: None))
-            median, low, high = spread_of(times)
-            row = {"device": name, "threads": cores, "designs": designs, "granules": n, "repeats": len(times),
-                   "median_s": median, "granules_per_s": n / median, "designs_per_s": designs / median}
-            if name == "cpu" and "cuda" in flown:
-                gap = np.abs(flown["cuda"] - flown["cpu"])
-                row["landings_bit_equal"] = int(np.sum(np.all(gap == 0.0, axis=1)))
-                row["max_landing_diff_m"] = float(gap.max())
-            table.add(row)
-            say(f"flight {name:4s} {designs:5d} designs: {median * 1e3:8.1f} ms ({n / median / 1e6:6.2f} M granules/s)"
-                + (f", landings equal {row['landings_bit_equal']}/{n}, max diff {row['max_landing_diff_m']:.2g} m"
-                   if "max_landing_diff_m" in row else ""))
-
-
-def turn_inputs(designs: int, toy: bool) -> dict:
-    """`plain_finish.drawn_turns`' arguments for `designs` paper designs: one paper design's
-    granules (2048 in 8 replicates; 16 in 2 when `toy`) and the laws of their turns
-    (`rotations.TurnLaws`), repeated, each design's replicates on streams of their own."""
-    from spreadgym.config.materials import load_library
-    from spreadgym.config.scene import load_scene
-    from spreadgym.physics.compiled import pcg64
-    from spreadgym.physics.granules import sample_granules
-    from spreadgym.spread import rotations
-
-    paper = load_scene("paper", {"sim.granules": 16, "sim.replicates": 2} if toy else {})
-    one = sample_granules(paper, load_library().fertilizer_of(paper))
-    first = np.arange(designs + 1) * one.count
-    run_first, run_start, run_stop, streams = rotations.turn_streams(
-        np.tile(one.replicate, designs), first, list(range(designs)), [0] * designs)
-    return {"skip": np.zeros(designs, dtype=bool), "first": first,
-            "copies": np.full(designs, rotations.copies_for(paper)[0], dtype=np.int64),
-            "runs": (run_first, run_start, run_stop, pcg64.seeded(streams)),
-            "laws": rotations.TurnLaws.of(np.tile(one.release_xy_m, (designs, 1)), [paper] * designs,
-                                          [one.count] * designs)}
-
-
-def draw_turns_of(inputs: dict, name: str) -> tuple:
-    """The turns of `turn_inputs` as the plain finish asks for them (`plain_finish.drawn_turns`:
-    drawn, turn_first, cosines, sines) on device `name`: one GPU launch
-    (`cuda_turns.draw_turns`), or its CPU twin `von_mises.flat_turns`, runs side by side on
-    the threads."""
-    from spreadgym import threads
-    from spreadgym.spread.plain_finish import drawn_turns
-
-    if name == "cuda":
-        from spreadgym.spread import cuda_turns
-
-        return drawn_turns(cuda_turns.draw_turns, **inputs)
-    from spreadgym.spread import von_mises
-
-    with threads.numba_threads():
-        return drawn_turns(von_mises.flat_turns, **inputs)
-
-
-def turns(rows: list, until: float, toy: bool, cores: int, save: Callable[[], None]) -> None:
-    """The copies' turns alone (`turn_inputs`): one GPU launch, its copies included, against
-    its CPU twin on the `cores` threads, 32 and 1024 paper designs, the cosines compared
-    (rows 1..); each row appended to `rows` and `save`d as it comes."""
-    from numba import cuda
-
-    for designs in ((1, 2) if toy else (32, 1024)):  # 32: a part of the vector env's 64-sub-env step
-        inputs, drawn = turn_inputs(designs, toy), {}
-        for name in ("cuda", "cpu"):
-            if time.time() > until - 3.0:
-                say(f"out of time before the turns on {name} at {designs} designs")
-                continue
-            times, drawn[name] = timed(partial(draw_turns_of, inputs, name), 3, min(until, time.time() + 8.0),
-                                       sync=cuda.synchronize if name == "cuda" else (lambda: None))
-            median, low, high = spread_of(times)
-            row = {"device": name, "threads": cores, "designs": designs, "repeats": len(times), "median_s": median,
-                   "low_s": low, "high_s": high, "designs_per_s": designs / median}
-            if name == "cpu" and "cuda" in drawn:
-                _, turn_first, cos, _ = drawn["cpu"]
-                drawn_rows = np.ones(cos.size, dtype=bool)  # row 0 of each design is not drawn
-                for d in range(designs):
-                    drawn_rows[turn_first[d]:turn_first[d] + inputs["first"][d + 1] - inputs["first"][d]] = False
-                gap = np.abs(drawn["cuda"][2] - cos)[drawn_rows]
-                row["cos_bit_equal_fraction"] = float(np.mean(gap == 0.0))
-                row["max_cos_diff"] = float(gap.max(initial=0.0))
-            rows.append(row)
-            save()
-            say(f"turns {name:4s} {designs:5d} designs: {median * 1e3:8.1f} ms ({designs / median:9.1f} designs/s)"
-                + (f", cosines equal {row['cos_bit_equal_fraction']:.6f}, max diff {row['max_cos_diff']:.2g}"
-                   if "max_cos_diff" in row else ""))
-
-
-def fly_parts(n: int, parts: int, name: str) -> np.ndarray:
-    """Landing points of n synthetic launches (`launches`) flown in `parts` `flight.fly`
-    calls side by side on the threads, on device `name` (the paper scene's flight and its
-    fertilizer's particle density, configs/materials.yaml)."""
-    from spreadgym.config.materials import load_library
-    from spreadgym.config.scene import load_scene
-    from spreadgym.spread import flight
-    from spreadgym.threads import thread_map
-
-    paper = load_scene("paper")
-    density = load_library().fertilizer_of(paper).particle_density_kg_m3
-    position, height, velocity, diameter = launches(n)
-    rows = np.array_split(np.arange(n), parts)
-    found = thread_map(lambda i: flight.fly(position[rows[i]], height[rows[i]], velocity[rows[i]], diameter[rows[i]],
-                                            density, paper.flight, device=name).position_m, parts)
-    return np.concatenate(found)
 
 
 def spinner_runs_of(count: int, library, granules: Optional[int], unique: int = 512):
@@ -1056,15 +895,6 @@ def summary(out: Path) -> None:
         else:
             lines.append(f"GPU: {gpu.get('gpu')}, compile + first launch {num(gpu.get('compile_and_first_launch_s'))} s"
                          + (" (CUDA simulator)" if gpu.get("sim") else ""))
-            if "flight_compile_error" in gpu:
-                lines.append(f"  flight kernel: no compile ({gpu['flight_compile_error'][:300]})")
-            elif "flight_compile_and_first_launch_s" in gpu:
-                seconds = num(gpu["flight_compile_and_first_launch_s"])
-                lines.append(f"  flight kernel: compile + first launch {seconds} s")
-            if "turns_compile_error" in gpu:
-                lines.append(f"  turns kernel: no compile ({gpu['turns_compile_error'][:300]})")
-            elif "turns_compile_and_first_launch_s" in gpu:
-                lines.append(f"  turns kernel: compile + first launch {num(gpu['turns_compile_and_first_launch_s'])} s")
             match = gpu.get("match", {}).get("summary")
             if match:
                 lines.append("  GPU vs CPU: " + ", ".join(f"{k}={v}" for k, v in match.items()))
@@ -1079,19 +909,6 @@ def summary(out: Path) -> None:
                          f"{r['designs']:>5s} designs: {num(r['designs_per_s']):>9s} "
                          f"[{num(float(r['granule_runs_per_s']) / 1e6, 2)}] x{r['repeats']}"
                          + (f"  {schedule} (same bits: {note.rsplit(': ', 1)[-1]})" if schedule else ""))
-    def alone(title: str, rows: list[dict], note: Callable[[dict], str]) -> list[str]:
-        """A part timed alone: its title, then designs/s per device and size, each with `note`."""
-        return [title] * bool(rows) + [
-            f"  {r['device']:4s} {str(r['threads']):>2s} thr {str(r['designs']):>5s} designs: "
-            f"{num(r['designs_per_s']):>9s} x{r['repeats']}" + note(r) for r in rows]
-
-    lines += alone("Flights alone (designs of 2048 granules), designs/s:", rows_of("gpu_flight.csv"),
-                   lambda r: f"  (landings equal {r['landings_bit_equal']}/{r['granules']}, max diff "
-                             f"{r['max_landing_diff_m']} m)" if r.get("max_landing_diff_m") else "")
-    lines += alone("Turns alone (paper designs), designs/s:",
-                   json.loads(gpu_path.read_text()).get("turns", []) if gpu_path.exists() else [],
-                   lambda r: f"  (cosines equal {r['cos_bit_equal_fraction']:.6f}, max diff {r['max_cos_diff']:.2g})"
-                             if "max_cos_diff" in r else "")
     batch = rows_of("gpu_batch.csv")
     if batch:
         lines.append(f"Whole batch of paper designs, {batch[0]['threads']} threads finishing (vector env: steps/s):")

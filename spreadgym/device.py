@@ -1,15 +1,15 @@
-"""Where the compiled spinner kernel (and a batch's flights and turns) run: the CPU (default) or a CUDA GPU.
+"""Where the compiled spinner kernel runs: the CPU (default) or a CUDA GPU.
 
 The device is, first found: the one `using` holds on this thread (an environment's
 `device` keyword), what `set_device` was given (the CLI's `--device`), the environment
 variable SPREADGYM_DEVICE, else "cpu". On "cuda" the spinner stage of a run or a batch
 is one kernel launch over all its granules (`physics.compiled.cuda_spinner`: the CPU
-kernel's own scalar functions compiled by numba.cuda), and so are a batch's flights of
-plain designs (`spread.cuda_flight`) and their release-angle copies' turns
-(`spread.cuda_turns`); the rest of the finish stays on the CPU threads
-(`spreadgym.threads`). A process drives the GPU from the thread that runs its batch;
-worker processes (the vector env's `workers`) each drive it for their own batches, with
-their shares of the threads, so threads and devices never multiply.
+kernel's own scalar functions compiled by numba.cuda); the finish (flights, the copies'
+turns, trays, CV) stays on the CPU threads (`spreadgym.threads`), where it was measured
+to run faster than on a GPU (docs/performance.md, "What stays on the CPU"). A process
+drives the GPU from the thread that runs its batch; worker processes (the vector env's
+`workers`) each drive it for their own batches, with their shares of the threads, so
+threads and devices never multiply.
 
 numba's CUDA target is optional (`pip install spreadgym[cuda]` adds NVIDIA's
 numba-cuda); nothing here imports it unless "cuda" is asked for. Asking for it where no
@@ -39,7 +39,7 @@ def set_device(name: Optional[str]) -> None:
 
 
 def current() -> str:
-    """The device a compiled spinner stage (and a batch's flights and turns) runs on now."""
+    """The device a compiled spinner stage runs on now."""
     held = getattr(_held, "name", None)
     if held is not None:
         return held

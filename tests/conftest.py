@@ -62,7 +62,6 @@ GPU_LAUNCH_LOGGER = """
 import os
 if os.environ.get("SPREADGYM_TEST_LAUNCH_LOG"):
     from spreadgym.physics.compiled import cuda_spinner
-    from spreadgym.spread import cuda_flight, cuda_turns
 
     def _logged(module, name, kind):
         call = getattr(module, name)
@@ -75,17 +74,15 @@ if os.environ.get("SPREADGYM_TEST_LAUNCH_LOG"):
         setattr(module, name, logged)
 
     _logged(cuda_spinner, "run_all", "spinner")
-    _logged(cuda_flight, "fly_all", "flight")
-    _logged(cuda_turns, "draw_turns", "turns")
 """
 
 
 @pytest.fixture
 def gpu_launch_log(tmp_path):
     """(env, launches): `env` for a `cuda_simulator` script makes it and every process it
-    starts (spawned or forked workers included) log each GPU launch of the spinner, the
-    flight and the copies' turns, through a sitecustomize on PYTHONPATH; `launches()`
-    gives {kind: set of process ids that launched it}."""
+    starts (spawned or forked workers included) log each GPU launch of the spinner,
+    through a sitecustomize on PYTHONPATH; `launches()` gives {kind: set of process ids
+    that launched it}."""
     folder = tmp_path / "launch-logger"
     folder.mkdir()
     (folder / "sitecustomize.py").write_text(GPU_LAUNCH_LOGGER)

@@ -226,7 +226,7 @@ class DesignConfig(StrictModel):
     scene_overrides: dict[str, Any] = Field(default_factory=dict, description="dotted scene keys")
     model: str = Field(default="auto", description="spinner model (see spreadgym.physics.selection)")
     device: Optional[Literal["cpu", "cuda"]] = Field(
-        default=None, description="where the compiled spinner (and a batch's flights and turns) run: cpu, or cuda "
+        default=None, description="where the compiled spinner runs: cpu, or cuda "
                                   "(a GPU: `pip install spreadgym[cuda]`); null: SPREADGYM_DEVICE, else cpu "
                                   "(spreadgym.device)")
     materials: Optional[str] = Field(

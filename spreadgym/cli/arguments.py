@@ -90,7 +90,7 @@ def add_materials_flag(parser: argparse.ArgumentParser) -> None:
 
 
 def add_device(parser: argparse.ArgumentParser) -> None:
-    """`--device cpu|cuda`: where the compiled spinner (and a batch's flights and turns) run (spreadgym.device)."""
+    """`--device cpu|cuda`: where the compiled spinner runs (spreadgym.device)."""
     parser.add_argument("--device", choices=("cpu", "cuda"),
-                        help="where the compiled spinner (and a batch's flights and turns) run: cpu, or cuda "
+                        help="where the compiled spinner runs: cpu, or cuda "
                              "(an NVIDIA GPU; `pip install spreadgym[cuda]`) (default: SPREADGYM_DEVICE, else cpu)")

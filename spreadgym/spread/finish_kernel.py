@@ -2,12 +2,12 @@
 trays and the CV estimate of every design, designs side by side on numba's threads.
 
 `finish_designs` runs, for each design, the kernels `pipeline.finish_scene` calls one
-by one with numpy and Python between them: `von_mises.turn_run` (the copies' turns,
-unless a GPU drew them before: `cuda_turns`), `rotations.turned_copies` (where each copy
-lands across the track), `binning.bin_landings` (the trays), `estimate.bout_cvs` (the CV
-at the target and the CV curve) and `departure.means_of` (the departure summary), with
-the glue between them in the same arithmetic, so every figure is the same bits
-(spreadgym.spread.plain_finish holds the rest and the tests).
+by one with numpy and Python between them: `von_mises.antithetic_turns` (the copies'
+turns), `rotations.turned_copies` (where each copy lands across the track),
+`binning.bin_landings` (the trays), `estimate.bout_cvs` (the CV at the target and the
+CV curve) and `departure.means_of` (the departure summary), with the glue between them in
+the same arithmetic, so every figure is the same bits (spreadgym.spread.plain_finish
+holds the rest and the tests).
 
 The outputs are flat arrays, each design's part at offsets the caller gives: the copies'
 sample (`sample_first`), the trays (`tray_first`: room for `tray_room` trays, at least
@@ -25,34 +25,31 @@ from spreadgym.spread.binning import OK, bin_landings
 from spreadgym.spread.estimate import bout_cvs
 from spreadgym.spread.pattern import fold_pair_arrays
 from spreadgym.spread.rotations import turned_copies
-from spreadgym.spread.von_mises import turn_run
+from spreadgym.spread.von_mises import antithetic_turns
 
 NO_ROOM = 100
 """A status beyond binning's: the design's row needed more trays than the caller made room for."""
 
 
 @PARALLEL
-def finish_designs(skip, first, copies, run_first, run_start, run_stop, states, kappa, cos_mu, sin_mu, held, drawn,
-                   turn_first, turn_cos, turn_sin, departed, flown_first, landing, mass, replicate, replicates,
-                   sample_first, out_x, out_mass, out_replicate, width, min_half_trays, max_trays, tray_first,
-                   tray_room, masses_first, out_pooled, out_per_replicate, target_trays, racetrack, out_status,
-                   out_half_trays, out_target, out_curve, position, velocity, spin, time, sign, out_means):
+def finish_designs(skip, first, copies, run_first, run_start, run_stop, states, kappa, cos_mu, sin_mu, held, departed,
+                   flown_first, landing, mass, replicate, replicates, sample_first, out_x, out_mass, out_replicate,
+                   width, min_half_trays, max_trays, tray_first, tray_room, masses_first, out_pooled,
+                   out_per_replicate, target_trays, racetrack, out_status, out_half_trays, out_target, out_curve,
+                   position, velocity, spin, time, sign, out_means):
     """Design d's granules are first[d]..first[d + 1] - 1 of the granule columns (`kappa`,
     `cos_mu`, `sin_mu`, `held`: `rotations.TurnLaws`; `departed`, `mass`, `replicate`);
     its departed ones landed at `landing` rows flown_first[d].. (disc frame, m); its
     replicates' PCG64 states are rows run_first[d].. of `states` (each covering granules
-    run_start..run_stop - 1 of the design). With `drawn` set its turns were drawn before
-    (on a GPU, `cuda_turns`): rows 1.. of its (copies, granules) cosines and sines, flat,
-    are turn_cos, turn_sin from turn_first[d] (written over here: row 0 and the held
-    granules' columns); else it draws them here (`von_mises.turn_run`, the same bits).
-    Fills the design's copies' sample (x across the track, mass, replicate), its pooled
-    trays (from tray_first[d]) and (replicates, T) tray masses (from masses_first[d]),
-    T = 2 m + 1 (m in out_half_trays, the binning status in out_status), its (raw,
-    corrected, s.e., usable) at the target's bout of target_trays[d] trays (out_target[d])
-    and at every curve width of 1..2 r + 1 trays, r the reach of the loaded trays (out_curve
-    rows from tray_first[d]; none where nothing landed); and `Departure.means` of its
-    departures (`position`, `velocity`, `spin`, `time` granule columns; `sign` the sense of
-    its rotation) in out_means[d] (the count as a float). A design with skip[d] set is left
+    run_start..run_stop - 1 of the design). Fills the design's copies' sample (x across the
+    track, mass, replicate), its pooled trays (from tray_first[d]) and (replicates, T) tray
+    masses (from masses_first[d]), T = 2 m + 1 (m in out_half_trays, the binning status in
+    out_status), its (raw, corrected, s.e.,
+    usable) at the target's bout of target_trays[d] trays (out_target[d]) and at every
+    curve width of 1..2 r + 1 trays, r the reach of the loaded trays (out_curve rows from
+    tray_first[d]; none where nothing landed); and `Departure.means` of its departures
+    (`position`, `velocity`, `spin`, `time` granule columns; `sign` the sense of its
+    rotation) in out_means[d] (the count as a float). A design with skip[d] set is left
     alone (its outputs unwritten): one whose turns the kernel does not draw (a concentration
     above von_mises.LARGE_KAPPA, where numpy draws a normal angle)."""
     for d in prange(first.size - 1):
@@ -63,24 +60,21 @@ def finish_designs(skip, first, copies, run_first, run_start, run_stop, states, 
             position[a:a + n], velocity[a:a + n], spin[a:a + n], time[a:a + n], departed[a:a + n], sign[d])
         out_means[d, 0], out_means[d, 1], out_means[d, 2] = count, speed, speed_sd
         out_means[d, 3], out_means[d, 4], out_means[d, 5] = spin_mean, angle, time_mean
-        if drawn:
-            cos, sin = turn_cos[turn_first[d]:turn_first[d + 1]], turn_sin[turn_first[d]:turn_first[d + 1]]
-        else:
-            cos, sin = np.empty(k * n), np.empty(k * n)
-            envelope = np.empty(n)
-            for r in range(run_first[d], run_first[d + 1]):
-                turn_run(states[r], run_start[r], run_stop[r], kappa[a:a + n], envelope, cos_mu[a:a + n],
-                         sin_mu[a:a + n], k, cos, sin)
-        cos[:n] = 1.0  # copy 0 is the granule itself
-        sin[:n] = 0.0
+        cos = np.empty(k * n)
+        sin = np.empty(k * n)
+        cos_rows, sin_rows = cos.reshape((k, n)), sin.reshape((k, n))
+        cos_rows[0] = 1.0  # copy 0 is the granule itself
+        sin_rows[0] = 0.0
+        r0, r1 = run_first[d], run_first[d + 1]
+        antithetic_turns(states[r0:r1], run_start[r0:r1], run_stop[r0:r1], kappa[a:a + n], cos_mu[a:a + n],
+                         sin_mu[a:a + n], cos_rows, sin_rows)
         landed_x, landed_y = np.full(n, np.nan), np.full(n, np.nan)
         every = True
         f = flown_first[d]
         for j in range(n):
             if held[a + j]:  # pulled back by the clip: every copy keeps the granule's angle
-                for c in range(k):
-                    cos[c * n + j] = 1.0
-                    sin[c * n + j] = 0.0
+                cos_rows[:, j] = 1.0
+                sin_rows[:, j] = 0.0
             if departed[a + j]:
                 landed_x[j], landed_y[j] = landing[f, 0], landing[f, 1]
                 f += 1

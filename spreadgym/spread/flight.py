@@ -40,7 +40,6 @@ from typing import Optional
 import numpy as np
 
 from spreadgym.config.scene import Flight
-from spreadgym.device import DEVICES
 from spreadgym.errors import ConfigError
 from spreadgym.physics import magnus
 from spreadgym.physics.constants import GRAVITY_M_S2
@@ -135,7 +134,6 @@ def fly(
     rtol: float = DEFAULT_RTOL,
     spin_rad_s=None,
     lift: Optional[bool] = None,
-    device: str = "cpu",
 ) -> Landing:
     """Fly N granules from their launch state to the ground.
 
@@ -148,11 +146,8 @@ def fly(
     Granules launched at height 0 land at once (time 0, launch point). `lift`: whether
     the Magnus lift acts (None: `lift_acts` of these granules); a batch that flies a
     run's granules in parts gives every part the run's own answer, so that each granule
-    lands as it does in the whole run. `device` "cuda": one GPU launch
-    (spreadgym.spread.cuda_flight; the same arithmetic, up to the GPU's fused multiply-adds).
+    lands as it does in the whole run.
     """
-    if device not in DEVICES:
-        raise ConfigError("device", f"unknown device {device!r}; allowed: {', '.join(DEVICES)}")
     pos, height, vel, diameter, density, spin = _check_inputs(
         position_m, height_m, velocity_m_s, diameter_m, density_kg_m3, gravity_m_s2, spin_rad_s
     )
@@ -168,15 +163,9 @@ def fly(
         par, table = k[None, :], np.empty((7, 0))
     ground_velocity = vel.copy()  # ground frame: the machine's forward speed added
     ground_velocity[:, 1] += flight.forward_speed_m_s
-    landing_xy = np.empty((pos.shape[0], 2))
+    landing_xy = np.empty_like(pos)
     landing_t = np.empty(pos.shape[0])
-    if device == "cuda":
-        from spreadgym.spread import cuda_flight  # numba's CUDA target: only when asked for
-
-        fly_all = cuda_flight.fly_all
-    else:
-        fly_all = flight_kernel.fly_all
-    failed = fly_all(
+    failed = flight_kernel.fly_all(
         np.ascontiguousarray(pos), height, ground_velocity, par, table, lift,
         float(flight.wind_m_s[0]), float(flight.wind_m_s[1]), float(gravity_m_s2),
         0.0 if dt_s is None else float(dt_s), float(atol), float(rtol), landing_xy, landing_t,

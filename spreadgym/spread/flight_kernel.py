@@ -30,13 +30,6 @@ MAX_STEPS = 1_000_000  # per granule
 _NEWTON_ITERATIONS = 50  # most landing iterations per granule
 LANES = 16  # granules flown side by side
 _EMPTY, _FREE, _LANDING = 0, 1, 2  # what a lane is doing
-# `fly_range`'s work arrays, their shapes module constants (numba.cuda sizes a GPU
-# thread's local arrays from constants only: spreadgym.spread.cuda_flight)
-WORK_VECTORS = (5, 3, LANES)  # position, velocity, first stage, new position, spin base
-WORK_STAGES = (2, 7, 3, LANES)  # the step's velocity and acceleration stages
-WORK_LANES = (7, LANES)  # time, step, full step, landing bracket (2), drag constant, 1/|omega|
-WORK_LIFTS = (2, LANES)  # lift parameters
-WORK_INTS = (3, LANES)  # step count, mode, granule
 
 # Dormand-Prince 5(4) tableau (FSAL: the 7th stage is the next step's first).
 _A = np.array([
@@ -195,47 +188,37 @@ def fly_all(position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
     velocity[j] (m/s) to z = 0; landing points into out_xy (N, 2), times into out_t (N,).
     dt > 0: fixed-step RK4; dt = 0: adaptive Dormand-Prince 5(4) with local error
     tolerances atol, rtol. A granule at height <= 0 lands at once where it is.
-    `par`, `table`: per-granule parameters (see `_accel`). Returns the number of granules
-    that failed to land (within MAX_FLIGHT_S, MAX_STEPS, or a step above 1e-12 s).
-    `fly_range` over all of them, with its lanes' work arrays (`lane_arrays`)."""
-    vectors, stages, lanes, lf, ints = lane_arrays()
-    return fly_range(0, position.shape[0], position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
-                     atol, rtol, out_xy, out_t, vectors, stages, lanes, lf, ints)
-
-
-@KERNEL
-def lane_arrays():
-    """The work arrays of `fly_range`'s lanes (it zeroes them): vectors, stages, lanes, lf
-    and ints (int64), of the WORK_* shapes."""
-    return (np.empty(WORK_VECTORS), np.empty(WORK_STAGES), np.empty(WORK_LANES), np.empty(WORK_LIFTS),
-            np.empty(WORK_INTS, dtype=np.int64))
-
-
-@INLINED
-def fly_range(first, stop, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt, atol, rtol,
-              out_xy, out_t, vectors, stages, lanes, lf, ints):
-    """`fly_all` of granules first..stop-1, in work arrays the caller gives (`lane_arrays`
-    on the CPU; a GPU thread's local arrays in spreadgym.spread.cuda_flight, which flies
-    LANES granules a thread): each lane's position, velocity, first stage, new position and
-    spin base (vectors, each (3, L)), its step's velocity and acceleration stages (stages:
-    sv, sa, each (7, 3, L)), its time, step, full step, landing bracket, drag constant and
-    1/|omega| (lanes rows), lift parameters (lf), and step count, mode and granule (ints).
+    `par`, `table`: per-granule parameters (see `_accel`).
 
     LANES granules fly side by side, each on its own: every pass takes one step (or one
     landing iteration) in every lane, so the lanes' independent arithmetic overlaps
     instead of waiting on one granule's chain of stages; a lane whose granule has landed
-    takes the next one. Returns the number of granules that failed to land."""
-    x, v, a1, x_new, base = vectors[0], vectors[1], vectors[2], vectors[3], vectors[4]
-    sv, sa = stages[0], stages[1]
-    t, h, h_full, lo, hi, kk, cs = lanes[0], lanes[1], lanes[2], lanes[3], lanes[4], lanes[5], lanes[6]
-    count, mode, idx = ints[0], ints[1], ints[2]
-    _zero(vectors, stages, lanes, lf, ints)  # a lane that never takes a granule still computes (and reads idx)
+    takes the next one. Returns the number of granules that failed to land (within
+    MAX_FLIGHT_S, MAX_STEPS, or a step above 1e-12 s)."""
     adaptive = dt == 0.0
+    x = np.zeros((3, LANES))
+    v = np.zeros((3, LANES))
+    a1 = np.zeros((3, LANES))
+    x_new = np.zeros((3, LANES))
+    sv = np.zeros((7, 3, LANES))
+    sa = np.zeros((7, 3, LANES))
+    t = np.zeros(LANES)
+    h = np.zeros(LANES)  # the length of the lane's next step (while landing: the trial step length)
+    h_full = np.zeros(LANES)  # while landing: the step that crossed the ground
+    lo = np.zeros(LANES)
+    hi = np.zeros(LANES)
+    count = np.zeros(LANES, dtype=np.int64)  # steps taken, or landing iterations
+    mode = np.full(LANES, _EMPTY, dtype=np.int64)
+    idx = np.zeros(LANES, dtype=np.int64)
+    kk = np.zeros(LANES)  # the lane's granule's K, its lift parameters and 1/|omega| (see `_accel`)
+    lf = np.zeros((2, LANES))
+    cs = np.zeros(LANES)
+    base = np.zeros((3, LANES))  # the lane's spin at its step (`_spin_bases`)
     failed = 0
-    next_j = first
+    next_j = 0
     active = 0
     for q in range(LANES):
-        next_j = _take(next_j, stop, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
+        next_j = _take(next_j, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
                        x, v, a1, t, h, count, mode, idx, kk, lf, out_xy, out_t)
         if mode[q] == _FREE:
             active += 1
@@ -297,7 +280,7 @@ def fly_range(first, stop, position, height, velocity, par, table, lift, wind_x,
                 else:
                     h[q] = tau_new
             if done:
-                next_j = _take(next_j, stop, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
+                next_j = _take(next_j, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
                                x, v, a1, t, h, count, mode, idx, kk, lf, out_xy, out_t)
                 if mode[q] != _FREE:
                     active -= 1
@@ -305,30 +288,12 @@ def fly_range(first, stop, position, height, velocity, par, table, lift, wind_x,
 
 
 @INLINED
-def _zero(vectors, stages, lanes, lf, ints):
-    """Every work array of `fly_range` set to 0 (loops: a GPU thread's local arrays too)."""
-    for q in range(LANES):
-        for c in range(3):
-            for r in range(WORK_VECTORS[0]):
-                vectors[r, c, q] = 0.0
-            for m in range(WORK_STAGES[1]):
-                for r in range(WORK_STAGES[0]):
-                    stages[r, m, c, q] = 0.0
-        for r in range(WORK_LANES[0]):
-            lanes[r, q] = 0.0
-        for r in range(WORK_LIFTS[0]):
-            lf[r, q] = 0.0
-        for r in range(WORK_INTS[0]):
-            ints[r, q] = 0
-
-
-@INLINED
-def _take(next_j, stop, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
+def _take(next_j, q, position, height, velocity, par, table, lift, wind_x, wind_y, g, dt,
           x, v, a1, t, h, count, mode, idx, kk, lf, out_xy, out_t):
     """Put the next granule that is above the ground into lane q (those at height <= 0
     land at once where they are), or leave the lane empty (h = 0) when none is left.
-    Returns the index after the one taken (granules up to stop - 1)."""
-    while next_j < stop:
+    Returns the index after the one taken."""
+    while next_j < position.shape[0]:
         j = next_j
         next_j += 1
         out_xy[j, 0] = position[j, 0]

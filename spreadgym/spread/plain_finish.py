@@ -18,8 +18,7 @@ whole batch is:
    on which granules fly beside it; tests/spread/test_flight.py);
 3. every design's turns, copies, trays, CV at the target and CV curve in one parallel
    kernel (`finish_kernel.finish_designs`: the same kernels `finish_scene` calls, with the
-   same glue compiled between them); on a GPU the turns are drawn there first, one
-   launch for the batch (`cuda_turns`), and the kernel takes them;
+   same glue compiled between them);
 4. per design, the result's objects and metrics (`pipeline.result_of`).
 
 A design the kernel cannot finish exactly as `finish_scene` does (a feed spot so small
@@ -35,7 +34,7 @@ from typing import Sequence
 
 import numpy as np
 
-from spreadgym import device, threads
+from spreadgym import threads
 from spreadgym.physics.compiled import pcg64
 from spreadgym.physics.departure import Departure, tilted_by_cone
 from spreadgym.spread import discs, estimate, pattern, rotations
@@ -108,12 +107,11 @@ def finish_plain(plans: Sequence[ScenePlan], departures: Sequence[list[Departure
     means = np.empty((len(plans), 6))
     sense = np.array([math.copysign(1.0, scene.spinner.omega_rad_s) for scene in scenes])
     racetrack = np.array([scene.pattern.driving == "racetrack" for scene in scenes])
-    drawn = _turns_on_gpu(numpy_turns, first, copies, runs, laws)
     with threads.numba_threads():
-        finish_designs(numpy_turns, first, copies, *runs, laws.kappa, laws.cos_mu, laws.sin_mu, laws.held, *drawn,
-                       departed, flown_first, landing_xy, g.mass_kg, g.replicate, replicates, sample_first, out_x,
-                       out_mass, out_replicate, width, min_half, pattern.MAX_TRAYS, tray_first, room, masses_first,
-                       out_pooled, out_masses, target_trays, racetrack, status, half_trays, target, curve,
+        finish_designs(numpy_turns, first, copies, *runs, laws.kappa, laws.cos_mu, laws.sin_mu, laws.held, departed,
+                       flown_first, landing_xy, g.mass_kg, g.replicate, replicates, sample_first, out_x, out_mass,
+                       out_replicate, width, min_half, pattern.MAX_TRAYS, tray_first, room, masses_first, out_pooled,
+                       out_masses, target_trays, racetrack, status, half_trays, target, curve,
                        every.departure.position_m, every.departure.velocity_m_s, every.departure.spin_rad_s,
                        every.departure.time_s, sense, means)
     landing_xy += 0.0  # finish_scene adds the disc's centre, 0 here, which turns -0.0 into 0.0: the same bits
@@ -156,32 +154,6 @@ def _tray_room(landing_xy: np.ndarray, flown: np.ndarray, flown_first: np.ndarra
     return np.minimum(2 * np.maximum(min_half, trays.astype(np.int64)) + 1, pattern.MAX_TRAYS)
 
 
-def _turns_on_gpu(skip: np.ndarray, first: np.ndarray, copies: np.ndarray, runs: tuple,
-                  laws: rotations.TurnLaws) -> tuple:
-    """`finish_designs`' (drawn, turn_first, turn_cos, turn_sin): on a GPU (this thread's
-    device "cuda") the turns drawn there in one launch (`drawn_turns` by `cuda_turns`); on
-    the CPU none, the kernel draws them."""
-    if device.current() != "cuda":
-        return False, np.zeros(first.size, dtype=np.int64), np.empty(0), np.empty(0)
-    from spreadgym.spread import cuda_turns
-
-    return drawn_turns(cuda_turns.draw_turns, skip, first, copies, runs, laws)
-
-
-def drawn_turns(draw, skip: np.ndarray, first: np.ndarray, copies: np.ndarray, runs: tuple,
-                laws: rotations.TurnLaws) -> tuple:
-    """`finish_designs`' (True, turn_first, turn_cos, turn_sin) with the turns of every design
-    but the skipped (whose turns numpy draws: `finish_scene`) drawn before the kernel by
-    `draw` (`cuda_turns.draw_turns`, or its CPU twin `von_mises.flat_turns`)."""
-    run_first, run_start, run_stop, states = runs
-    run_design = np.repeat(np.arange(first.size - 1), np.diff(run_first))
-    kept = ~skip[run_design]
-    turn_first = np.concatenate([[0], np.cumsum(copies * np.diff(first))])
-    turn_cos, turn_sin = draw(states[kept], run_design[kept], run_start[kept], run_stop[kept], first, copies,
-                              turn_first, laws.kappa, laws.cos_mu, laws.sin_mu)
-    return True, turn_first, turn_cos, turn_sin
-
-
 @lru_cache(maxsize=256)
 def _target_trays(target_swath_m: float, tray_width_m: float) -> int:
     """Trays in the target's bout (`pattern.bout_tray_counts`)."""
@@ -192,9 +164,8 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
              counts: np.ndarray, flown: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Landing points (M, 2; disc frame) and times (M,) of the departed granules of all
     designs, in order: designs that fly alike (one flight, the lift on or off) in parts on
-    the threads, each part a `flight.fly` call given the lift of its designs; on a GPU
-    (this thread's device "cuda"), one launch for each kind, from this thread."""
-    on = device.current()
+    the threads, each part a `flight.fly` call given the lift of its designs (on the CPU
+    also where the spinner ran on a GPU: docs/performance.md, "What stays on the CPU")."""
     heights = np.repeat([s.spinner.height_m for s in scenes], counts)
     position, height, velocity, spin = launch_columns(every.launch, departed, heights)
     diameter = every.granules.diameter_m[departed]
@@ -210,8 +181,7 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
     parts = []  # (flight, lift, granule rows: a slice or indices)
     count = threads.thread_count()
     parts_wanted = PARTS_PER_THREAD * count if count > 1 else 1  # on one thread, more parts only add calls
-    step = (max(owner.size, 1) if on == "cuda" else
-            int(np.clip(-(-owner.size // parts_wanted), SMALLEST_PART, PART_GRANULES)))
+    step = int(np.clip(-(-owner.size // parts_wanted), SMALLEST_PART, PART_GRANULES))
     for flight, lift, members in kinds:
         rows = np.flatnonzero(np.isin(owner, members)) if len(kinds) > 1 else None
         size = owner.size if rows is None else rows.size
@@ -223,12 +193,8 @@ def _flights(scenes: list, throws: list[discs.Throw], every: discs.Throw, depart
     def fly(p: int) -> None:
         flight, lift, rows = parts[p]
         landed = flight_model.fly(position[rows], height[rows], velocity[rows], diameter[rows], density[rows], flight,
-                                  spin_rad_s=spin[rows], lift=lift, device=on)
+                                  spin_rad_s=spin[rows], lift=lift)
         landing_xy[rows], landing_t[rows] = landed.position_m, landed.time_s
 
-    if on == "cuda":
-        for p in range(len(parts)):
-            fly(p)
-    else:
-        threads.thread_map(fly, len(parts))
+    threads.thread_map(fly, len(parts))
     return landing_xy, landing_t

@@ -26,10 +26,9 @@ import math
 from typing import Sequence
 
 import numpy as np
-from numba import prange
 
 from spreadgym.physics.compiled import pcg64
-from spreadgym.physics.compiled.options import INLINED, KERNEL, PARALLEL
+from spreadgym.physics.compiled.options import INLINED, KERNEL
 
 SMALL_KAPPA = 1e-8  # below: the angle is uniform on (-pi, pi) (numpy's limit)
 LARGE_KAPPA = 1e6  # above: the angle is normal with variance 1/kappa (numpy's limit)
@@ -67,81 +66,31 @@ def _draw(state, k, s):
     return w, (-sine if pcg64.next_double(state) < 0.5 else sine)
 
 
-@INLINED
-def turn_run(state, start, stop, kappa, envelope, cos_mu, sin_mu, copies, cos_out, sin_out):
-    """Rows 1..copies - 1 of columns start..stop - 1 of one design's turns: von Mises(mu_j,
-    kappa_j) angles in antithetic pairs mu + phi, mu - phi, drawn from the PCG64 `state`
-    (stepped in place) pair by pair, column by column, as `rng.vonmises(0,
-    broadcast_to(kappa, (copies // 2, columns)))` draws them; rows 1..copies // 2 take
-    mu + phi, the rest mu - phi of the first pairs. `kappa`, `envelope` (filled here for
-    these columns), `cos_mu`, `sin_mu` hold the design's N columns, `cos_out`, `sin_out` its
-    (copies, N) rows flat (copy-major). Row 0 is left alone; every kappa <= LARGE_KAPPA. The
-    CPU's `antithetic_turns`, the plain finish's kernel and `batch_run` (the GPU's) draw with it."""
-    n = kappa.size
-    pairs = copies // 2
-    minus = copies - 1 - pairs
-    for j in range(start, stop):
-        envelope[j] = _envelope(kappa[j])
-    for i in range(pairs):
-        for j in range(start, stop):
-            c, s = _draw(state, kappa[j], envelope[j])
-            cm, sm = cos_mu[j], sin_mu[j]
-            plus = (1 + i) * n + j
-            cos_out[plus], sin_out[plus] = cm * c - sm * s, sm * c + cm * s
-            if i < minus:
-                back = (1 + pairs + i) * n + j
-                cos_out[back], sin_out[back] = cm * c + sm * s, sm * c - cm * s
-
-
 @KERNEL
 def antithetic_turns(states, starts, stops, kappa, cos_mu, sin_mu, cos_out, sin_out):
-    """Fill rows 1.. of `cos_out`, `sin_out` (K, N; C-contiguous) with the cosines and sines
-    of the turns of N granules (`turn_run`), run r (columns starts[r]..stops[r] - 1) drawn
-    from the PCG64 states[r] (`pcg64.seeded`; stepped in place). Row 0 is left alone."""
-    copies, n = cos_out.shape
-    if kappa.size != n:  # turn_run's rows are kappa.size long
+    """Fill rows 1.. of `cos_out`, `sin_out` (K, N) with the cosines and sines of von
+    Mises(mu_j, kappa_j) angles in antithetic pairs mu + phi, mu - phi, column j of run
+    r (columns starts[r]..stops[r] - 1) drawn from the PCG64 states[r] (`pcg64.seeded`;
+    stepped in place). Per run the phi are drawn pair by pair, column by column, as
+    `rng.vonmises(0, broadcast_to(kappa, (K // 2, columns)))` draws them; rows 1..K//2
+    take mu + phi, the remaining K - 1 - K//2 rows mu - phi of the first pairs. Row 0 is
+    left alone. Every kappa must be <= LARGE_KAPPA (`fill_turns` sees to it)."""
+    if kappa.size != cos_out.shape[1]:  # the columns are read unchecked below
         raise ValueError("antithetic_turns: kappa must have one entry per column of cos_out")
-    envelope = np.empty(n)
-    flat_cos, flat_sin = cos_out.reshape(copies * n), sin_out.reshape(copies * n)
+    pairs = cos_out.shape[0] // 2
+    minus = cos_out.shape[0] - 1 - pairs
     for r in range(starts.size):
-        turn_run(states[r], starts[r], stops[r], kappa, envelope, cos_mu, sin_mu, copies, flat_cos, flat_sin)
-
-
-@INLINED
-def batch_run(r, state, run_design, run_start, run_stop, first, copies, turn_first, kappa, envelope, cos_mu, sin_mu,
-              turn_cos, turn_sin):
-    """Run r of a batch's turns, drawn before the finish (`flat_turns`, `cuda_turns`): columns
-    run_start[r]..run_stop[r] - 1 of design d = run_design[r] (granule columns first[d]..
-    first[d + 1] - 1 of `kappa`, `cos_mu`, `sin_mu`, and of the `envelope` scratch) from the
-    PCG64 `state` (stepped in place), into rows 1.. of the design's (copies[d], granules)
-    block of the flat `turn_cos`, `turn_sin` (from turn_first[d]): `turn_run`."""
-    d = run_design[r]
-    a, b, t0, t1 = first[d], first[d + 1], turn_first[d], turn_first[d + 1]
-    turn_run(state, run_start[r], run_stop[r], kappa[a:b], envelope[a:b], cos_mu[a:b], sin_mu[a:b], copies[d],
-             turn_cos[t0:t1], turn_sin[t0:t1])
-
-
-@PARALLEL
-def _flat_turns(states, run_design, run_start, run_stop, first, copies, turn_first, kappa, cos_mu, sin_mu, turn_cos,
-                turn_sin):
-    envelope = np.empty(kappa.size)
-    for r in prange(run_start.size):
-        batch_run(r, states[r].copy(), run_design, run_start, run_stop, first, copies, turn_first, kappa, envelope,
-                  cos_mu, sin_mu, turn_cos, turn_sin)
-
-
-def flat_turns(states: np.ndarray, run_design: np.ndarray, run_start: np.ndarray, run_stop: np.ndarray,
-               first: np.ndarray, copies: np.ndarray, turn_first: np.ndarray, kappa: np.ndarray, cos_mu: np.ndarray,
-               sin_mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """`cuda_turns.draw_turns` on the CPU, runs side by side on numba's threads (callers hold
-    `threads.numba_threads()`): the same arguments, layout and bits, each run from a copy of
-    its state (the given states are left as they are); rows 0, and blocks of designs
-    without runs, left unwritten. The GPU's reference (the device check, the tests); the
-    plain finish draws on the CPU inside its own kernel instead."""
-    turn_cos, turn_sin = np.empty(int(turn_first[-1])), np.empty(int(turn_first[-1]))
-    _flat_turns(states, run_design, run_start, run_stop, first, copies, turn_first, kappa, cos_mu, sin_mu, turn_cos,
-                turn_sin)
-    return turn_cos, turn_sin
+        start, stop = starts[r], stops[r]
+        envelope = np.empty(stop - start)
+        for j in range(start, stop):
+            envelope[j - start] = _envelope(kappa[j])
+        for i in range(pairs):
+            for j in range(start, stop):
+                c, s = _draw(states[r], kappa[j], envelope[j - start])
+                cm, sm = cos_mu[j], sin_mu[j]
+                cos_out[1 + i, j], sin_out[1 + i, j] = cm * c - sm * s, sm * c + cm * s
+                if i < minus:
+                    cos_out[1 + pairs + i, j], sin_out[1 + pairs + i, j] = cm * c + sm * s, sm * c - cm * s
 
 
 def fill_turns(seeds: Sequence[Sequence[int]], starts: np.ndarray, stops: np.ndarray, kappa: np.ndarray,

@@ -10,7 +10,7 @@ from spreadgym import threads
 from spreadgym.config.scene import MAX_RPM, load_scene
 from spreadgym.errors import ConfigError
 from spreadgym.physics.selection import SPINNER_MODELS
-from spreadgym.spread import pattern, plain_finish, rotations, von_mises
+from spreadgym.spread import pattern, rotations
 from spreadgym.spread.batch import run_batch
 from spreadgym.spread.pipeline import finish_scene, plan_scene, run_scene
 from spreadgym.spread.plain_finish import finish_plain, is_plain
@@ -36,31 +36,6 @@ def test_plain_designs_finish_as_finish_scene_does_bit_for_bit(library, monkeypa
     scenes = [load_scene("paper", {**small, "sim.seed": i, **extra}) for i, extra in enumerate(settings)]
     scenes.append(load_scene("field", {**small, "sim.seed": 40}))
     assert all(is_plain(plan_scene(s, "auto", library)) for s in scenes)
-    for new, old in zip(*_finished_both_ways(scenes, library)):
-        _same(new, old)
-
-
-def _turns_drawn_before(skip, first, copies, runs, laws):
-    """`plain_finish._turns_on_gpu` as a GPU answers it, drawn on the CPU by the GPU's twin
-    (`von_mises.flat_turns`); each block's row 0 then made garbage and the held granules'
-    columns left drawn, both of which the kernel must write over."""
-    drawn, turn_first, cos, sin = plain_finish.drawn_turns(von_mises.flat_turns, skip, first, copies, runs, laws)
-    for d in range(first.size - 1):
-        cos[turn_first[d]:turn_first[d] + first[d + 1] - first[d]] = 7.0
-        sin[turn_first[d]:turn_first[d] + first[d + 1] - first[d]] = -7.0
-    assert laws.held.any()  # the feed spot at the rim: some release points pulled back by the clip
-    runs[3][:] = 0  # the states spent, as a GPU leaves the host's: a kernel that drew again would not find these turns
-    return drawn, turn_first, cos, sin
-
-
-def test_turns_drawn_before_the_kernel_give_the_same_bits(library, monkeypatch):
-    """The kernel's path for turns a GPU drew (`drawn`) against `finish_scene`: designs of
-    7 and 32 copies, held granules (a feed spot at the rim), a design numpy's turns take."""
-    monkeypatch.setattr(plain_finish, "_turns_on_gpu", _turns_drawn_before)
-    small = {"sim.granules": 384}
-    settings = [{}, {"feed.radius_m": 0.12, "feed.spread_m": 0.03}, {"vanes.pitch_deg": 15.0, "sim.angle_copies": 7},
-                {"sim.replicates": 2, "feed.spread_m": 0.00002}, {"spinner.rpm": 10.0}]
-    scenes = [load_scene("paper", {**small, "sim.seed": i, **extra}) for i, extra in enumerate(settings)]
     for new, old in zip(*_finished_both_ways(scenes, library)):
         _same(new, old)
 

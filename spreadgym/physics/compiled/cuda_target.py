@@ -1,5 +1,5 @@
-"""numba's CUDA target, loaded once for spreadgym's GPU kernels (the spinner's and the
-flight's), and what they share: `host_array`.
+"""numba's CUDA target, loaded once for spreadgym's GPU kernel (the spinner's), and its
+helper `host_array`.
 
 Imported only when the device is "cuda" (spreadgym.device). numba.cuda compiles a
 CPU-jitted function that a GPU kernel calls from its Python source, so the kernels call

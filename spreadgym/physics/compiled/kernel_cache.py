@@ -18,10 +18,10 @@ _PHYSICS = Path(__file__).resolve().parents[1]
 _SPREAD = _PHYSICS.parent / "spread"
 KERNEL_SOURCES = (*sorted((_PHYSICS / "compiled").glob("*.py")), _PHYSICS / "magnus.py", _PHYSICS / "granules.py",
                   _PHYSICS / "departure.py",
-                  *(_SPREAD / f"{name}.py" for name in ("flight_kernel", "cuda_flight", "cuda_turns", "finish_kernel",
-                                                         "binning", "estimate", "pattern", "rotations", "von_mises")))
+                  *(_SPREAD / f"{name}.py" for name in ("flight_kernel", "finish_kernel", "binning", "estimate",
+                                                         "pattern", "rotations", "von_mises")))
 """Every file with a cached kernel, CPU or GPU: a kernel calling into another file (the
-spinner's phases, the PCG64 steps, the tray CV, the GPU kernels' CPU physics) needs the
+spinner's phases, the PCG64 steps, the tray CV, the GPU kernel's CPU physics) needs the
 whole set watched."""
 STAMP_NAME = "kernel-sources.sha256"
 

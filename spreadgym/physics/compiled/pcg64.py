@@ -21,8 +21,7 @@ import numpy as np
 from spreadgym.physics.compiled.options import INLINED, KERNEL
 
 HIGH, LOW, INC_HIGH, INC_LOW, HAS_HALF, HALF = range(6)
-STATE_WORDS = 6
-"""The words of a state (uint64 (STATE_WORDS,)): the LCG state and increment (high and low 64
+"""The words of a state (uint64 (6,)): the LCG state and increment (high and low 64
 bits), and whether a 32-bit half of the last output is kept for the next 32-bit draw."""
 MULTIPLIER_HIGH = np.uint64(0x2360ED051FC65DA4)  # the 128-bit LCG multiplier (numpy's, O'Neill's)
 MULTIPLIER_LOW = np.uint64(0x4385DF649FCCF645)
@@ -114,7 +113,7 @@ def _seeded(entropy, lengths):
 @INLINED
 def _set_seed(words):
     """numpy's `pcg64_set_seed` of each row (state high, low, sequence high, low)."""
-    states = np.zeros((words.shape[0], STATE_WORDS), dtype=np.uint64)
+    states = np.zeros((words.shape[0], 6), dtype=np.uint64)
     one = np.uint64(1)
     for r in range(words.shape[0]):
         s = states[r]
