@@ -1,14 +1,15 @@
 """One measuring run for a lent 16-core machine with an NVIDIA GPU (the device tool's
 `nvidia-h100-x1` / `nvidia-h200`): CPU scaling of the batch paths and the CUDA spinner
 against the CPU, in one call of a few minutes. Run through `agents/device_check.sh`,
-which installs the carried wheels and this repository into a temporary folder first; never run by
-the tests or `make bench`.
+which installs the carried wheels and this repository into a folder first (a new temporary
+one, or `SITE`, kept for a second call on the same machine) and, with `MPS=1`, runs this
+under NVIDIA's Multi-Process Service; never run by the tests or `make bench`.
 
 What it measures (every figure is written under `--out` as soon as it exists, so a run
 cut short still returns what it did):
 
-1. versions and the machine (env.json): python, numpy, numba, numba-cuda, cores, GPU.
-2. CPU scaling at 1, 2, 4, 8, 16 threads (`spreadgym.threads.set_threads`), median of
+1. versions and the machine (env.json): python, numpy, numba, numba-cuda, cores, GPU, MPS.
+2. (not with `--gpu-only`) CPU scaling at 1, 2, 4, 8, 16 threads (`spreadgym.threads.set_threads`), median of
    `--repeats` timed blocks after a warm-up block, the two series' blocks interleaved
    (cpu_scaling.csv, the columns of docs/bench/batch-16-cores-scaling.csv):
    (a) `run_batch` of `--batch` mixed paper / field / twin-field scenes, built as
@@ -54,8 +55,8 @@ run keeps to `--deadline-s` from its start (the CPU sections leave `--gpu-reserv
 it to the GPU). Without a GPU the GPU section says so and stops. `--quick` shrinks the CPU
 sections for a dry run on a small machine (24 designs, two thread counts); `--gpu-sim`
 runs the GPU section on numba's CUDA simulator at toy sizes (a check of this script, not
-a timing). At most 8 files come back: env.json, cpu_scaling.csv, cpu_stages.csv,
-gpu.json, gpu_spinner.csv, gpu_batch.csv and the shell script's device_check.log.
+a timing). Seven files come back: env.json, cpu_scaling.csv, cpu_stages.csv, gpu.json,
+gpu_spinner.csv, gpu_batch.csv and the shell script's device_check.log.
 """
 
 from __future__ import annotations
@@ -310,7 +311,8 @@ def versions(out: Path) -> dict:
 
     found = {"python": platform.python_version(), "executable": sys.executable, "machine": platform.machine(),
              "cores_os": os.cpu_count(), "cores_affinity": len(os.sched_getaffinity(0)),
-             "numba_num_threads": numba.config.NUMBA_NUM_THREADS}
+             "numba_num_threads": numba.config.NUMBA_NUM_THREADS,
+             "mps": os.environ.get("DEVICE_CHECK_MPS") == "1"}  # device_check.sh's MPS=1, started
     for name in ("numpy", "numba", "llvmlite", "numba-cuda", "scipy", "gymnasium", "pydantic", "pymunk", "cffi",
                  "cuda-bindings", "cuda-pathfinder"):
         try:
@@ -386,7 +388,6 @@ def cpu_main(args) -> None:
         scaling, stages = Table(out / "cpu_scaling.csv"), Table(out / "cpu_stages.csv")
         counts = [] if args.gpu_only else thread_counts(args.quick, args.threads)
         library = load_library()
-        scenes, papers = mixed_scenes(args.batch), paper_designs(args.batch)
         with section("CPU warm-up (numba's first compile, or its cache)", 240):
             threads.set_threads(counts[-1] if counts else None)
             started = time.perf_counter()
@@ -402,25 +403,10 @@ def cpu_main(args) -> None:
             env["vector_env_memory_guard_raised_at"] = list(GUARD_RAISED)
             write_json(out / "env.json", env)
 
-        reference: dict = {}
-        if not counts:
+        if counts:
+            cpu_series(args, counts, library, venv, work, scaling, stages)
+        else:
             say("--gpu-only: no CPU scaling series")
-        with section(f"CPU scaling at {counts} threads: run_batch of {args.batch} mixed scenes and the vector env "
-                     f"({args.batch} sub-envs), then run_batch's stages on {args.batch} paper designs",
-                     args.cpu_cap_s) as until:
-            until = min(until, CLOCK.t0 + CLOCK.deadline_s - args.gpu_reserve_s)
-            for n in counts:
-                last = n == counts[-1]
-                if last and n > 1:  # measured even when late: the all-cores figure matters most
-                    wait_for(work / "compiled", min(until - 25.0, time.time() + args.compile_wait_s),
-                             f"the CUDA compile to end (the {n}-thread series want the machine to themselves)")
-                elif time.time() > until:
-                    say(f"out of time before {n} threads")
-                    continue
-                threads.set_threads(n)
-                guarded(f"scaling at {n} threads", scaling_rows, n, args, scenes, library, venv, reference, scaling,
-                        until, work)
-                guarded(f"stages at {n} threads", stage_row, n, args, papers, library, reference, stages, until, work)
     except Exception as error:  # noqa: BLE001 (outside every section: still wait for the GPU and summarise)
         say(f"!! CPU process: {type(error).__name__}: {error}")
     finally:
@@ -437,6 +423,31 @@ def cpu_main(args) -> None:
                 child.kill()
                 child.wait()
         summary(out)
+
+
+def cpu_series(args, counts: list[int], library, venv, work: Path, scaling: Table, stages: Table) -> None:
+    """The CPU scaling series at `counts` threads (`scaling_rows`, `stage_row`), the
+    all-cores count after the CUDA compile has ended."""
+    from spreadgym import threads
+
+    scenes, papers = mixed_scenes(args.batch), paper_designs(args.batch)
+    reference: dict = {}
+    with section(f"CPU scaling at {counts} threads: run_batch of {args.batch} mixed scenes and the vector env "
+                 f"({args.batch} sub-envs), then run_batch's stages on {args.batch} paper designs",
+                 args.cpu_cap_s) as until:
+        until = min(until, CLOCK.t0 + CLOCK.deadline_s - args.gpu_reserve_s)
+        for n in counts:
+            last = n == counts[-1]
+            if last and n > 1:  # measured even when late: the all-cores figure matters most
+                wait_for(work / "compiled", min(until - 25.0, time.time() + args.compile_wait_s),
+                         f"the CUDA compile to end (the {n}-thread series want the machine to themselves)")
+            elif time.time() > until:
+                say(f"out of time before {n} threads")
+                continue
+            threads.set_threads(n)
+            guarded(f"scaling at {n} threads", scaling_rows, n, args, scenes, library, venv, reference, scaling,
+                    until, work)
+            guarded(f"stages at {n} threads", stage_row, n, args, papers, library, reference, stages, until, work)
 
 
 def scaling_rows(n: int, args, scenes, library, venv, reference: dict, table: Table, until: float,
@@ -830,9 +841,10 @@ def whole_batches(table: Table, library, until: float, granules: Optional[int], 
         row = {"what": "vector env steps", "device": name, "threads": cores, "workers": workers, "batch": size,
                "designs_per_s": size / median, "low": size / high, "high": size / low, "repeats": len(times),
                "built_and_reset_s": built_s}
-        other = rewards.get(("cuda", size, 1))
-        if (name, workers) != ("cuda", 1) and other is not None and other.shape == rewards[name, size, workers].shape:
-            row["max_abs_reward_diff_vs_cuda"] = float(np.abs(rewards[name, size, workers] - other).max())
+        other, mine = rewards.get(("cuda", size, 1)), rewards[name, size, workers]
+        if (name, workers) != ("cuda", 1) and other is not None:  # every run steps from the same seeds and actions
+            both = min(other.size, mine.size)  # the steps both timed
+            row["max_abs_reward_diff_vs_cuda"] = float(np.abs(mine[:both] - other[:both]).max())
         table.add(row)
         say(f"vector env {name:4s} {size:5d} {workers:2d} workers: {size / median:8.1f} steps/s ({len(times)} blocks)"
             + (f", max |reward - cuda's| {row['max_abs_reward_diff_vs_cuda']:.3g}"

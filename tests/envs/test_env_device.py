@@ -31,7 +31,7 @@ def test_an_env_on_a_missing_gpu_fails_at_make_in_one_line():
 def test_workers_share_the_simulated_gpu_with_the_cpu_rewards(cuda_simulator, gpu_launch_log):
     """The vector env's worker processes may share a GPU: two workers on the simulated GPU
     step as one process on the CPU (rewards and observations bit for bit), and each worker
-    launches its own block's spinner, flights and turns on the GPU (logged in the workers)."""
+    launches its own block's spinner on the GPU (logged in the workers)."""
     env, launches = gpu_launch_log
     found = cuda_simulator(
         "import json, os, numpy as np, gymnasium as gym, spreadgym\n"

@@ -2,7 +2,7 @@
 helper `host_array`.
 
 Imported only when the device is "cuda" (spreadgym.device). numba.cuda compiles a
-CPU-jitted function that a GPU kernel calls from its Python source, so the kernels call
+CPU-jitted function that a GPU kernel calls from its Python source, so the kernel calls
 the CPU's own scalar functions, and a change to the physics reaches both devices; under
 numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1) a kernel runs as Python, calling those
 functions as they are.
