@@ -21,6 +21,7 @@ import multiprocessing
 import pickle
 import signal
 import threading
+import time
 import traceback
 from contextlib import contextmanager
 from multiprocessing.connection import Connection
@@ -32,7 +33,8 @@ import numpy as np
 from spreadgym import device, threads
 
 _START = multiprocessing.get_context("spawn")
-_CLOSE_WAIT_S = 10.0  # a worker still running this long after "close" is terminated
+_CLOSE_WAIT_S = 10.0  # the workers still running this long after "close" are terminated
+_OWED_WAIT_S = 1.0  # a worker whose answer is abandoned (its pipe closed) is terminated after this
 
 
 @contextmanager
@@ -81,6 +83,7 @@ class Shards:
                 theirs.close()
                 self._pipes.append(ours)
                 self._processes.append(process)
+                self._owed.add(len(self._pipes) - 1)  # its start answer: a Ctrl-C before it is read abandons it
             self._answers(list(range(workers)), workers, {}, starting=True)  # built, or the first error raised
         except BaseException:
             self.close()
@@ -147,10 +150,11 @@ class Shards:
                 self._owed.discard(w)  # gone: the next message to it says so
 
     def close(self) -> None:
-        """Stop every worker (closing their sub-envs), waiting _CLOSE_WAIT_S at most. A
-        worker that still owes the answer to an interrupted call (a second Ctrl-C) gets its
-        pipe closed instead: one blocked sending a large answer then stops at once, rather
-        than after the wait."""
+        """Stop every worker (closing their sub-envs), waiting _CLOSE_WAIT_S at most in all.
+        A worker that still owes an answer (to a call or to its start, interrupted by
+        Ctrl-C) gets its pipe closed instead and _OWED_WAIT_S to end: one blocked sending a
+        large answer stops at once, and one still building its sub-envs (numba's first
+        compile can take a minute) is terminated, so an interrupted start returns promptly."""
         for w, pipe in enumerate(self._pipes):
             if w in self._owed:
                 pipe.close()  # its send fails, or its next receive ends: `_serve` returns
@@ -159,8 +163,10 @@ class Shards:
                 pipe.send(("close", ()))
             except OSError:
                 pass  # already gone
-        for process in self._processes:
-            process.join(_CLOSE_WAIT_S)
+        now = time.monotonic()
+        deadline = {w: now + (_OWED_WAIT_S if w in self._owed else _CLOSE_WAIT_S) for w in range(len(self._processes))}
+        for w, process in enumerate(self._processes):
+            process.join(max(0.0, deadline[w] - time.monotonic()))
             if process.is_alive():
                 process.terminate()
                 process.join()

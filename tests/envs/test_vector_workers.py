@@ -9,6 +9,8 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+import time
 
 import gymnasium as gym
 import numpy as np
@@ -299,9 +301,10 @@ class _Probe:
     """A stand-in for a worker's vector env: what the worker loop sets up and hands back
     (it lives in the spawned worker; `closed` is a file it writes when closed)."""
 
-    def __init__(self, num_envs: int, closed: str = "", fail: bool = False):
+    def __init__(self, num_envs: int, closed: str = "", fail: bool = False, slow_s: float = 0.0):
         if fail:
             raise ConfigError("granules", "expected >= 1, got 0")
+        time.sleep(slow_s)  # a slow build, as numba's first compile makes one
         self.num_envs, self.closed = num_envs, closed
 
     def setup(self):
@@ -380,7 +383,6 @@ def test_close_after_an_abandoned_call_does_not_wait_for_its_answers():
     """A second Ctrl-C abandons a call whose answers (here two frames of about a megabyte)
     are larger than a pipe holds: the workers block sending them, so close() closes their
     pipes rather than waiting _CLOSE_WAIT_S (10 s) for each."""
-    import time
 
     from spreadgym.envs import shards
 
@@ -409,3 +411,19 @@ def test_close_after_an_abandoned_call_does_not_wait_for_its_answers():
     venv.close()
     assert time.monotonic() - start < shards._CLOSE_WAIT_S / 2
     assert not any(process.is_alive() for process in processes)
+
+
+def test_a_ctrl_c_while_the_workers_start_ends_them_promptly(_python_ctrl_c):
+    """A Ctrl-C while the workers still build their sub-envs (each here takes 60 s, as a
+    first compile can take a minute) raises at once, and the workers are ended within
+    _OWED_WAIT_S, not after _CLOSE_WAIT_S each (30 s for three)."""
+    alarm = threading.Timer(2.0, os.kill, (os.getpid(), signal.SIGINT))
+    started = time.monotonic()
+    alarm.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            shards.Shards(_Probe, 3, 3, "cpu", {"slow_s": 60.0})
+    finally:
+        alarm.cancel()
+    assert time.monotonic() - started < 2.0 + shards._OWED_WAIT_S + 4.0
+    assert not [p for p in multiprocessing.active_children() if p.name.startswith("spreadgym-vector-worker")]
