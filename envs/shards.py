@@ -73,17 +73,18 @@ class Shards:
         self.blocks = blocks(num_envs, workers)
         self._pipes: list[Connection] = []
         self._processes: list = []
-        self._owed: set[int] = set()  # workers whose answer to an interrupted call is still in their pipe
+        self._owed: set[int] = set()  # workers whose answer (to their start or a call) is not read yet
         try:
             for (first, stop), share in zip(self.blocks, threads.shares(workers)):
                 ours, theirs = _START.Pipe()
                 process = _START.Process(target=_serve, args=(theirs, make, stop - first, share, device_name, kwargs),
                                          daemon=True, name=f"spreadgym-vector-worker-{len(self._pipes)}")
-                process.start()
+                with _ctrl_c_held():  # a worker started and not yet listed would escape close()
+                    process.start()
+                    self._pipes.append(ours)
+                    self._processes.append(process)
+                    self._owed.add(len(self._pipes) - 1)  # its start answer, until read
                 theirs.close()
-                self._pipes.append(ours)
-                self._processes.append(process)
-                self._owed.add(len(self._pipes) - 1)  # its start answer: a Ctrl-C before it is read abandons it
             self._answers(list(range(workers)), workers, {}, starting=True)  # built, or the first error raised
         except BaseException:
             self.close()
@@ -152,9 +153,11 @@ class Shards:
     def close(self) -> None:
         """Stop every worker (closing their sub-envs), waiting _CLOSE_WAIT_S at most in all.
         A worker that still owes an answer (to a call or to its start, interrupted by
-        Ctrl-C) gets its pipe closed instead and _OWED_WAIT_S to end: one blocked sending a
-        large answer stops at once, and one still building its sub-envs (numba's first
-        compile can take a minute) is terminated, so an interrupted start returns promptly."""
+        Ctrl-C) gets its pipe closed instead: one blocked sending a large answer stops at
+        once, and one still working on what nobody will read (building its sub-envs, where
+        numba's first compile can take a minute, or a step) is terminated after
+        _OWED_WAIT_S, so an interrupted start or step returns promptly."""
+        answered = {w for w in self._owed if self._pipes[w].poll(0)}  # idle since: they end at once
         for w, pipe in enumerate(self._pipes):
             if w in self._owed:
                 pipe.close()  # its send fails, or its next receive ends: `_serve` returns
@@ -164,7 +167,8 @@ class Shards:
             except OSError:
                 pass  # already gone
         now = time.monotonic()
-        deadline = {w: now + (_OWED_WAIT_S if w in self._owed else _CLOSE_WAIT_S) for w in range(len(self._processes))}
+        busy = self._owed - answered  # still building or computing what nobody will read
+        deadline = {w: now + (_OWED_WAIT_S if w in busy else _CLOSE_WAIT_S) for w in range(len(self._processes))}
         for w, process in enumerate(self._processes):
             process.join(max(0.0, deadline[w] - time.monotonic()))
             if process.is_alive():

@@ -301,11 +301,12 @@ class _Probe:
     """A stand-in for a worker's vector env: what the worker loop sets up and hands back
     (it lives in the spawned worker; `closed` is a file it writes when closed)."""
 
-    def __init__(self, num_envs: int, closed: str = "", fail: bool = False, slow_s: float = 0.0):
+    def __init__(self, num_envs: int, closed: str = "", fail: bool = False, slow_s: float = 0.0,
+                 close_s: float = 0.0):
         if fail:
             raise ConfigError("granules", "expected >= 1, got 0")
         time.sleep(slow_s)  # a slow build, as numba's first compile makes one
-        self.num_envs, self.closed = num_envs, closed
+        self.num_envs, self.closed, self.close_s = num_envs, closed, close_s
 
     def setup(self):
         from spreadgym import device
@@ -323,8 +324,10 @@ class _Probe:
         return _Unloadable()
 
     def close(self):
-        with open(self.closed, "w", encoding="utf-8") as handle:
-            handle.write("closed")
+        time.sleep(self.close_s)  # a close that hangs
+        if self.closed:
+            with open(self.closed, "w", encoding="utf-8") as handle:
+                handle.write("closed")
 
 
 class _Unloadable:
@@ -425,5 +428,19 @@ def test_a_ctrl_c_while_the_workers_start_ends_them_promptly(_python_ctrl_c):
             shards.Shards(_Probe, 3, 3, "cpu", {"slow_s": 60.0})
     finally:
         alarm.cancel()
+        alarm.join()  # no SIGINT left to arrive after the test
     assert time.monotonic() - started < 2.0 + shards._OWED_WAIT_S + 4.0
     assert not [p for p in multiprocessing.active_children() if p.name.startswith("spreadgym-vector-worker")]
+
+
+
+def test_close_waits_once_for_all_the_workers_not_for_each(monkeypatch):
+    """Three workers whose close hangs are terminated after one _CLOSE_WAIT_S in all (here
+    2 s), not one each (6 s)."""
+    monkeypatch.setattr(shards, "_CLOSE_WAIT_S", 2.0)
+    workers = shards.Shards(_Probe, 3, 3, "cpu", {"close_s": 60.0})
+    processes = list(workers._processes)
+    started = time.monotonic()
+    workers.close()
+    assert time.monotonic() - started < 2.0 + 2.5
+    assert not any(process.is_alive() for process in processes)
