@@ -163,7 +163,7 @@ def fly(
         par, table = k[None, :], np.empty((7, 0))
     ground_velocity = vel.copy()  # ground frame: the machine's forward speed added
     ground_velocity[:, 1] += flight.forward_speed_m_s
-    landing_xy = np.empty_like(pos)
+    landing_xy = np.empty((pos.shape[0], 2))  # C order whatever the input's: one compiled signature
     landing_t = np.empty(pos.shape[0])
     failed = flight_kernel.fly_all(
         np.ascontiguousarray(pos), height, ground_velocity, par, table, lift,

@@ -206,3 +206,15 @@ def test_same_input_same_bits_whatever_the_batch():
         for i in (1, 100, 255):
             alone = fly(*(x[i:i + 1] for x in args), flight, dt_s=dt_s, spin_rad_s=spin[i:i + 1])
             assert np.array_equal(alone.position_m[0], a.position_m[i]) and alone.time_s[0] == a.time_s[i]
+
+
+def test_a_column_major_launch_lands_as_a_row_major_one():
+    """Launch positions in Fortran order land at the same points, in a C-ordered array (the
+    landing kernel's one compiled signature)."""
+    args, spin = scene_launches(6, seed=3)
+    flight = Flight(magnus=True)
+    row_major = fly(*args, flight, spin_rad_s=spin)
+    column_major = fly(np.asfortranarray(args[0]), *args[1:], flight, spin_rad_s=spin)
+    assert column_major.position_m.flags.c_contiguous
+    np.testing.assert_array_equal(column_major.position_m, row_major.position_m)
+    np.testing.assert_array_equal(column_major.time_s, row_major.time_s)
