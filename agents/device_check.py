@@ -6,7 +6,8 @@ one, or `SITE`, kept for a second call on the same machine) and, with `MPS=1`, r
 under NVIDIA's Multi-Process Service; never run by the tests or `make bench`.
 
 What it measures (every figure is written under `--out` as soon as it exists, so a run
-cut short still returns what it did):
+cut short still returns what it did; with `--contention`, only 1 and then
+agents/contention.py's probe at the `--threads` counts, nothing beside it):
 
 1. versions and the machine (env.json): python, numpy, numba, numba-cuda, cores, GPU, MPS.
 2. (not with `--gpu-only`) CPU scaling at 1, 2, 4, 8, 16 threads (`spreadgym.threads.set_threads`), median of
@@ -423,6 +424,23 @@ def cpu_main(args) -> None:
                 child.kill()
                 child.wait()
         summary(out)
+
+
+def contention_main(args) -> None:
+    """`--contention`: the versions, the kernels warmed, then `contention.measure` at the
+    thread counts as process counts (nothing else runs beside it: no GPU process)."""
+    from spreadgym.agents import contention
+    from spreadgym.config.materials import load_library
+    from spreadgym.spread.batch import run_batch
+
+    out = Path(args.out)
+    with section("versions", 30):
+        versions(out)
+    with section("CPU warm-up (numba's first compile, or its cache)", 240):
+        run_batch(paper_designs(2, granules=64), library=load_library(), ci=False)
+    counts = thread_counts(args.quick, args.threads)
+    with section(f"contention probe at {counts} processes", CLOCK.left() - 10.0):
+        contention.measure(out, counts, phase_s=2.0 if args.quick else 5.0, say=say)
 
 
 def cpu_series(args, counts: list[int], library, venv, work: Path, scaling: Table, stages: Table) -> None:
@@ -944,6 +962,9 @@ def main(argv: Optional[list[str]] = None) -> None:
     parser.add_argument("--gpu-sim", action="store_true", help="the GPU section on numba's CUDA simulator, toy sizes")
     parser.add_argument("--gpu-only", action="store_true",
                         help="skip the CPU scaling series (a second call on a machine already measured)")
+    parser.add_argument("--contention", action="store_true",
+                        help="only the contention probe (agents/contention.py) at the --threads counts: why "
+                             "independent one-thread processes keep less than one core's rate each")
     parser.add_argument("--batch", type=int, default=None, help="designs per CPU block (default 256; quick 24)")
     parser.add_argument("--repeats", type=int, default=3, help="timed blocks after the warm-up")
     parser.add_argument("--threads", type=thread_list, default=None,
@@ -969,6 +990,9 @@ def main(argv: Optional[list[str]] = None) -> None:
     args.out, args.work = str(Path(args.out).resolve()), str(Path(args.work).resolve())
     if args.role == "gpu":
         gpu_main(args)
+        return
+    if args.contention:
+        contention_main(args)
         return
     try:
         cpu_main(args)
