@@ -67,8 +67,12 @@ def settings_to_action(env, settings: Mapping[str, Any]) -> np.ndarray:
 
 
 def action_to_settings(env, action) -> dict:
-    """Physical settings of a unit vector (clipped to [-1, 1]), laid out as `info["settings"]`."""
-    return _settings_map(env).to_settings(np.asarray(action, dtype=np.float64)).as_dict()
+    """Physical settings of a unit vector (clipped to [-1, 1]; checked as `step` checks
+    an action), laid out as `info["settings"]`."""
+    from spreadgym.envs.common.actions import check_action
+
+    smap = _settings_map(env)
+    return smap.to_settings(check_action(action, smap.size)).as_dict()
 
 
 def register_rllib() -> None:

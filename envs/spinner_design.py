@@ -67,7 +67,7 @@ class SpinnerDesignEnv(SpreadgymEnv):
         self._context = self._last = None  # a reset that fails leaves an env that needs one
         context = self.task.sample_context(self.np_random)
         self._sim_seed = int(self.np_random.integers(SEED_BOUND))
-        if options:
+        if options is not None:
             check_reset_options(options)
             if "context" in options:
                 context = self.task.replace_context(context, options["context"])

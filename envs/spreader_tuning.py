@@ -118,7 +118,7 @@ class SpreaderTuningEnv(SpreadgymEnv):
         super().reset(seed=seed)
         self._context = self._last = None  # a reset that fails leaves an env that needs one
         context = self.task.sample_context(self.np_random)
-        if options:
+        if options is not None:
             check_reset_options(options)
             if "context" in options:
                 context = self.task.replace_context(context, options["context"])

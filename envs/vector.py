@@ -47,6 +47,7 @@ from __future__ import annotations
 import copy
 from typing import Any, Optional
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -127,11 +128,16 @@ class SpinnerDesignVectorEnv(VectorEnv):
         """`reset` with each sub-env's info as its own dict (None for one the mask left
         alone) instead of gymnasium's stacked infos, which turn Python numbers into numpy
         scalars and a None among numbers into NaN (spreadgym.agents.batched_vec_env)."""
+        self._check_open()
         seeds = self._seeds(seed)
+        if options is not None and not isinstance(options, dict):
+            raise ConfigError("options", f"expected a mapping, got {type(options).__name__}")
         options = dict(options) if options else {}
         mask = self._reset_mask(options.pop("reset_mask")) if "reset_mask" in options else None
         if options:
             check_reset_options(options)  # here, so that a bad option resets nothing (in one process or in workers)
+            if "context" in options:
+                self.task.check_context(options["context"])
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))  # the vector env's own np_random, as gymnasium's
         each: list[Optional[dict]] = [None] * self.num_envs
@@ -167,6 +173,9 @@ class SpinnerDesignVectorEnv(VectorEnv):
         seeds = list(seed)
         if len(seeds) != self.num_envs:
             raise ValueError(f"reset got {len(seeds)} seeds for num_envs={self.num_envs}")
+        for i, s in enumerate(seeds):  # as a single env's reset takes them: a 1.5 or a "1" is no seed
+            if s is not None and (isinstance(s, (bool, np.bool_)) or not isinstance(s, (int, np.integer)) or s < 0):
+                raise ValueError(f"seed[{i}] must be a non-negative int or None, got {s!r}")
         return [None if s is None else int(s) for s in seeds]
 
     def _reset_mask(self, mask) -> np.ndarray:
@@ -192,6 +201,7 @@ class SpinnerDesignVectorEnv(VectorEnv):
         infos (see `reset_each`): (observations, rewards, terminated, truncated, infos,
         finals), finals[i] the (observation, info) that ended sub-env i's episode in
         same_step mode (its infos[i] is then the reset's), else None."""
+        self._check_open()
         actions = np.asarray(actions)
         if actions.shape[:1] != (self.num_envs,):
             raise ValueError(f"actions must have {self.num_envs} rows (one per sub-env), got shape {actions.shape}")
@@ -264,6 +274,10 @@ class SpinnerDesignVectorEnv(VectorEnv):
         scenes = [self.envs[i].design_scene(actions[i])[0] for i in stepping]
         task.run = _Prefetched(scenes, lambda part: task.run_batch(part, library))  # step() takes them; then Task.run
 
+    def _check_open(self) -> None:
+        if self.closed:
+            raise gym.error.ClosedEnvironmentError("the vector env is closed: make a new one")
+
     def close_extras(self, **kwargs: Any):
         if getattr(self, "_shards", None) is not None:  # getattr: also for an instance whose __init__ raised
             self._shards.close()
@@ -304,13 +318,18 @@ def _part_size(scenes: list) -> int:
     return size
 
 
-def step_designs(env, resets: list[tuple[Optional[int], Optional[dict]]], actions: list) -> list[tuple]:
+def step_designs(env, resets: list[tuple[int, Optional[dict]]], actions: list) -> list[tuple]:
     """`env.reset(seed=seed, options=options)` then `env.step(action)` for each reset and
     action in turn, on one SpinnerDesign env (wrappers included): the same returns, bit
     for bit, with the tray tests run as one batch. Each job is reset twice: once to learn
     the scene its step runs, once to step it. An env that pools runs to a precision or
     renders steps each job itself (`batched`); hidden batches (the robust variant) run
-    together in one library holding each episode's fertilizer copy."""
+    together in one library holding each episode's fertilizer copy. Every seed must be
+    given: an unseeded reset, done twice, would draw two different jobs."""
+    unseeded = [i for i, (seed, _) in enumerate(resets) if seed is None]
+    if unseeded:
+        raise ValueError(f"step_designs needs a seed for every job (each is reset twice); "
+                         f"jobs {unseeded[:5]} have none")
     base = env.unwrapped
     task = base.task
     if not batched(base):

@@ -276,6 +276,11 @@ class Task:
         self.context_scene(out)  # validates swath on the tray grid, speeds
         return out
 
+    def check_context(self, given: Any) -> None:
+        """Refuse reset's `options["context"]` as `replace_context` would refuse it, on a
+        fixed context (what the vector env checks before any sub-env resets)."""
+        self.replace_context(self.sample_context(np.random.default_rng(0)), given)
+
     def context_scene(self, context: Context) -> Scene:
         """The base scene set up for one job, with the fallback restitution where needed."""
         return self._job(context)[0]
@@ -423,9 +428,11 @@ def _within(value: float, span) -> bool:
 
 
 def _real(key: str, value: Any) -> float:
-    """A context number of reset's options as a float; anything but a real number is a ConfigError."""
+    """A context number of reset's options as a float; anything but a finite real number is a ConfigError."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ConfigError(f"options.context.{key}", f"expected a number, got {brief(value)}")
+    if not math.isfinite(value):
+        raise ConfigError(f"options.context.{key}", f"expected a finite number, got {value}")
     return float(value)
 
 

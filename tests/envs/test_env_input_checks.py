@@ -19,9 +19,12 @@ def env(request):
 
 
 @pytest.mark.parametrize("options, key", [
-    ({"context": {"wind_m_s": [float("nan"), 0.0]}}, "flight.wind_m_s.0"),
+    ({"context": {"wind_m_s": [float("nan"), 0.0]}}, "options.context.wind_m_s.0"),
     ({"context": {"wind_m_s": [1e6, 0.0]}}, "flight.wind_m_s.0"),
     ({"foo": 1}, "options.foo"),
+    ({"context": {"target_swath_m": float("nan")}}, "options.context.target_swath_m"),
+    ({"context": {"target_swath_m": float("inf")}}, "options.context.target_swath_m"),
+    ([], "options"),
 ])
 def test_reset_options_are_checked(env, options, key):
     with pytest.raises(ConfigError) as err:
@@ -136,3 +139,66 @@ def test_a_first_reset_that_fails_leaves_a_default_made_env_usable(env_id):
     env.reset(seed=1)
     _, reward, _, _, _ = env.step(np.zeros(env.action_space.shape))
     assert np.isfinite(reward)
+
+
+def test_action_to_settings_checks_the_action_as_step_does(env):
+    from spreadgym.envs import action_to_settings
+
+    size = env.action_space.shape[0]
+    with pytest.raises(ValueError, match="not finite"):
+        action_to_settings(env, [np.nan] + [0.0] * (size - 1))
+    with pytest.raises(ValueError, match=rf"shape \({size},\)"):
+        action_to_settings(env, [0.0] * (size + 1))
+    assert action_to_settings(env, [2.0] + [0.0] * (size - 1)) == action_to_settings(env, [1.0] + [0.0] * (size - 1))
+
+
+VECTOR = "spreadgym/SpinnerDesign-v1"
+
+
+@pytest.fixture(scope="module", params=[1, 2], ids=["one process", "two workers"])
+def vector(request):
+    made = gym.make_vec(VECTOR, num_envs=2, workers=request.param, granules=256)
+    yield made
+    made.close()
+
+
+def test_a_bad_context_value_resets_no_sub_env_of_the_vector_env(vector):
+    vector.reset(seed=0)
+    before = vector.step(np.zeros((2, 2)))
+    vector.reset(seed=0)
+    for given in ({"fertilizer": "nope"}, {"target_swath_m": float("nan")}):
+        with pytest.raises(ConfigError, match="options.context"):
+            vector.reset(options={"context": given})
+    after = vector.step(np.zeros((2, 2)))  # every sub-env as the seeded reset left it
+    assert np.array_equal(before[0], after[0]) and np.array_equal(before[1], after[1])
+
+
+@pytest.mark.parametrize("seeds", [[1.5, 2.0], ["1", "2"], [True, 1], [-1, 2]])
+def test_the_vector_env_takes_as_seeds_what_a_single_env_takes(vector, seeds):
+    with pytest.raises(ValueError, match=r"seed\[0\] must be a non-negative int or None"):
+        vector.reset(seed=seeds)
+
+
+def test_the_vector_env_refuses_options_that_are_no_mapping(vector):
+    with pytest.raises(ConfigError, match="options: expected a mapping, got str"):
+        vector.reset(options="context")
+
+
+def test_a_closed_vector_env_refuses_to_step_or_reset():
+    for workers in (1, 2):
+        made = gym.make_vec(VECTOR, num_envs=2, workers=workers, granules=256)
+        made.reset(seed=0)
+        made.close()
+        with pytest.raises(gym.error.ClosedEnvironmentError):
+            made.step(np.zeros((2, 2)))
+        with pytest.raises(gym.error.ClosedEnvironmentError):
+            made.reset(seed=0)
+
+
+def test_step_designs_refuses_an_unseeded_job():
+    from spreadgym.envs.vector import step_designs
+
+    made = gym.make(VECTOR, granules=256)
+    with pytest.raises(ValueError, match="needs a seed for every job"):
+        step_designs(made, [(None, None), (3, None)], [np.zeros(2)] * 2)
+    made.close()
