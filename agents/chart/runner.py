@@ -101,8 +101,10 @@ def connect_ray(workers: Optional[int], address: Optional[str]) -> bool:
             ray.init(address="local", num_cpus=cpus, include_dashboard=False, _node_ip_address=LOOPBACK,
                      _temp_dir=str(session_root()),
                      object_store_memory=OBJECT_STORE_BASE_BYTES + OBJECT_STORE_PER_WORKER_BYTES * cpus, **quiet)
-    except Exception as exc:  # whatever stops Ray's processes, the user gets one line
-        ray.shutdown()
+    except BaseException as exc:  # whatever stops Ray's start (Ctrl-C too) stops its processes
+        end_session()
+        if not isinstance(exc, Exception):
+            raise
         raise SpreadgymError(f"the embedded Ray ({cpus} CPUs) did not start: {first_line(exc)}") from None
     return True
 
@@ -134,21 +136,34 @@ def loopback_only() -> Iterator[None]:
 def session_root() -> Path:
     """Where the embedded Ray keeps its session folders (logs, sockets): a per-user cache
     ($XDG_CACHE_HOME or ~/.cache, spreadgym/ray), never the shared system temp folder.
-    Ray's Unix sockets need a short path (108 bytes with the session's own 60), so a
-    cache path longer than SESSION_ROOT_CHARS falls back to a folder of this user's own
-    (mode 700) under the system temp folder."""
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "spreadgym" / "ray"
-    if len(str(cache.absolute())) <= SESSION_ROOT_CHARS:
+    Ray makes the folder it is given writable by everyone (for other users' drivers), so
+    that folder lies inside one of this user's own (`_own_folder`, mode 700), which no one
+    else can enter. Ray's Unix sockets need a short path (108 bytes with the session's own
+    60), so a cache path longer than SESSION_ROOT_CHARS falls back to such a folder under
+    the system temp folder."""
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "spreadgym"
+    if len(str((cache / "ray").absolute())) <= SESSION_ROOT_CHARS:
         try:
-            cache.mkdir(parents=True, exist_ok=True, mode=0o700)
-            return cache.absolute()
+            return _ray_folder(_own_folder(cache.absolute(), link_allowed=True))
         except OSError:
             pass
-    private = Path(tempfile.gettempdir()) / f"spreadgym-ray-{os.getuid()}"
-    private.mkdir(mode=0o700, exist_ok=True)
-    if private.is_symlink() or private.stat().st_uid != os.getuid():
-        raise SpreadgymError(f"the embedded Ray's folder {private} is not this user's own; remove it")
-    return private
+    return _ray_folder(_own_folder(Path(tempfile.gettempdir()) / f"spreadgym-ray-{os.getuid()}", link_allowed=False))
+
+
+def _own_folder(folder: Path, link_allowed: bool) -> Path:
+    """`folder`, made if missing, refused unless it is this user's own (and, in a shared
+    folder, no link); its mode set to 700 (again at every start: an older version left it open)."""
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    if (folder.is_symlink() and not link_allowed) or folder.stat().st_uid != os.getuid():
+        raise SpreadgymError(f"the embedded Ray's folder {folder} is not this user's own; remove it")
+    folder.chmod(0o700)
+    return folder
+
+
+def _ray_folder(private: Path) -> Path:
+    folder = private / "ray"
+    folder.mkdir(exist_ok=True)
+    return folder
 
 
 def end_session() -> None:

@@ -262,7 +262,13 @@ def create_app(charts_dir: Path = Path("out/charts"), addresses: Addresses = LOO
 
     @app.get("/api/charts/{name:path}")
     def chart_detail(name: str):
-        return charts.chart_detail(jobs.root, name)
+        try:
+            return charts.chart_detail(jobs.root, name)
+        except charts.NotFound:
+            if not jobs.is_running_folder(name):
+                raise
+            # listed from its start (chart_list), before its first file is written: nothing to show yet
+            return {"name": name, "finished": False, "markdown": None, "rows": [], "files": [], "cell_pictures": []}
 
     @app.get("/files/charts/{name:path}")
     def chart_file(name: str):

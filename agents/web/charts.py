@@ -317,14 +317,22 @@ class ChartJobs:
                 left = max(0.0, status["estimate_s"] - elapsed)
         return {**status, "elapsed_s": elapsed, "left_s": left}
 
+    def is_running_folder(self, name: str) -> bool:
+        """Whether `name` is the running job's folder (compared as folders)."""
+        with self.lock:
+            out = self.status.get("out") if self.running() else None
+        return out is not None and inside(self.root, out) == inside(self.root, name)
+
     def remove(self, name: str) -> dict:
         """Remove an unfinished chart folder that no job is writing (`remove_folder`); the job's status is
         cleared when it is its folder."""
+        folder = inside(self.root, name)  # compared as folders: "job/", "job/." and "job" are one
         with self.lock:
-            if self.running() and self.status.get("out") == name:
+            ours = self.status.get("out") is not None and inside(self.root, self.status["out"]) == folder
+            if self.running() and ours:
                 raise SpreadgymError(f"chart {brief(name)}: its job is running; cancel it first")
             remove_folder(self.root, name)
-            if self.status.get("out") == name:
+            if ours:
                 self.status = {"state": "idle"}
             return {"removed": name}
 

@@ -101,10 +101,12 @@ def read_trays(path: str | Path, tray_width_m: float) -> TrayTest:
 
 
 def parse_trays(text: str, tray_width_m: float, source: str = "trays") -> TrayTest:
-    """`read_trays` on the file's text (`source` names it in errors)."""
+    """`read_trays` on the file's text (`source` names it in errors); a leading byte-order
+    mark (spreadsheets' "CSV UTF-8") is dropped, as reading the file as utf-8-sig drops it."""
     def fail(line: int, message: str) -> SpreadgymError:
         return SpreadgymError(f"--trays: {brief(source)} line {line}: {message}")
 
+    text = text.removeprefix("\ufeff")
     rows = []
     for number, line in enumerate(text.splitlines(), start=1):
         if len(line) > MAX_LINE_CHARS:

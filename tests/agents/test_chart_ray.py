@@ -93,6 +93,28 @@ def test_the_embedded_ray_listens_on_loopback_only_and_keeps_its_session_in_a_us
     assert {name for _, _, name, _ in sockets} >= {"gcs_server", "raylet"}, sockets
     assert all(loopback for *_, loopback in sockets), [row for row in sockets if not row[3]]
     assert any(name.startswith("session_2") for name in seen[1]) and session_root() == cache / "spreadgym" / "ray"
+    assert (cache / "spreadgym").stat().st_mode & 0o777 == 0o700  # Ray opens its own folder to all: not this one
     assert not [p for p in session_root().iterdir() if p.name.startswith("session_2")]  # removed at the end
     assert not ray.is_initialized() and os.environ.get("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER") is None
     shutil.rmtree(cache)
+
+
+def test_the_session_folders_lie_in_a_folder_no_other_user_can_enter(tmp_path, monkeypatch):
+    """Ray makes the folder it is given writable by all: its parent is this user's own, mode
+    700, set again where an older version left it open; a link in the shared temp folder is refused."""
+    import tempfile
+
+    from spreadgym.agents.chart.runner import session_root
+    from spreadgym.errors import SpreadgymError
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / ("long" * 20)))  # too long for Ray's sockets: the fallback
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "shared"))
+    private = tmp_path / "shared" / f"spreadgym-ray-{os.getuid()}"
+    private.mkdir(parents=True, mode=0o777)
+    private.chmod(0o777)
+    assert session_root() == private / "ray"
+    assert private.stat().st_mode & 0o777 == 0o700
+    private.rename(tmp_path / "elsewhere")
+    private.symlink_to(tmp_path / "elsewhere")
+    with pytest.raises(SpreadgymError, match="not this user's own"):
+        session_root()

@@ -136,3 +136,13 @@ def test_soft_tray_masses_on_any_layout_equal_the_exact_overlaps():
         np.testing.assert_allclose(got, exact, rtol=1e-9, atol=1e-15)
     contiguous = soft_tray_masses(x, mass, replicate, 4, np.arange(-30, 31) * w, w)
     assert contiguous.sum() == pytest.approx(mass.sum(), rel=1e-12)  # touching trays catch every landing
+
+
+def test_a_byte_order_mark_is_read_as_the_file_reader_reads_it(tmp_path):
+    """Spreadsheets' "CSV UTF-8" starts with a byte-order mark: the page's text and the CLI's file read alike."""
+    text = "x_m,mass_g\n" + "".join(f"{0.5 * i},{1.0 + 0.1 * i}\n" for i in range(-3, 4))
+    path = tmp_path / "trays.csv"
+    path.write_text("\ufeff" + text, encoding="utf-8")
+    from_file = read_trays(path, 0.5)
+    from_text = parse_trays("\ufeff" + text, 0.5)
+    assert np.array_equal(from_text.x_m, from_file.x_m) and np.array_equal(from_text.mass_kg, from_file.mass_kg)

@@ -271,3 +271,24 @@ def test_the_pages_plan_view_of_a_twin_machine_is_its_first_disc():
     plan = plot_data(scene, Precise())["plan"]
     assert plan["tracks"] and all(np.hypot(*np.asarray(path)).max() <= radius * (1 + 1e-3) for path in plan["tracks"])
     assert all(np.hypot(path[0][0], path[1][0]) == pytest.approx(radius, rel=1e-2) for path in plan["rays"])
+
+
+def test_the_running_jobs_folder_is_neither_removed_nor_missing_under_another_spelling(tmp_path):
+    """While a job runs (its status as `ChartJobs.start` sets it; no Ray here), its folder
+    is refused for removal however the path spells it, and answers (nothing yet) before its
+    first file, as the list shows it from the start."""
+    app = create_app(tmp_path)
+    client = TestClient(app, base_url=LOCAL)  # no lifespan: no simulation worker needed
+    app.state.jobs.status = {"state": "running", "out": "job", "done": 0, "total": 4, "message": "",
+                             "started": time.time(), "estimate_s": None}
+    listed = client.get("/api/charts").json()["charts"]
+    assert [c["name"] for c in listed] == ["job"]
+    early = client.get("/api/charts/job")
+    assert early.status_code == 200 and early.json()["files"] == [] and not early.json()["finished"]
+    assert client.get("/api/charts/other").status_code == 404
+    (tmp_path / "job" / "cells").mkdir(parents=True)
+    (tmp_path / "job" / "manifest.json").write_text("{}")
+    for path in ("/api/charts/job", "/api/charts/job/"):
+        refused = client.delete(path)
+        assert refused.status_code == 422 and "its job is running" in refused.json()["error"], path
+    assert (tmp_path / "job" / "manifest.json").exists()

@@ -30,9 +30,13 @@ function fileUrl(folder, name) {
   return "/files/charts/" + folder.split("/").concat(name.split("/")).map(encodeURIComponent).join("/");
 }
 
+let asked = 0;  // the latest chart asked for: an earlier one's answer, arriving later, is not shown
+
 async function showChart(name) {
+  const mine = ++asked;
   try {
     const c = await api("/api/charts/" + name.split("/").map(encodeURIComponent).join("/"));
+    if (mine !== asked) return;
     const parts = [c.markdown ? markdown(c.markdown) :
       "<p>Not finished yet: " + c.cell_pictures.length + " cell picture(s) so far.</p>"];
     const links = c.files.map((f) => `<a href="${fileUrl(name, f)}">${escaped(f)}</a>`).join(" · ");
@@ -45,7 +49,7 @@ async function showChart(name) {
     $("chart").innerHTML = parts.join("\n");
     $("error").textContent = "";
   } catch (err) {
-    fail(err);
+    if (mine === asked) fail(err);
   }
 }
 

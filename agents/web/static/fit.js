@@ -1,6 +1,7 @@
 // The fit page: a tray CSV and the keys to fit -> POST /api/fit -> estimates, intervals, pictures, fitted scene;
 // and the working width wanted -> POST /api/advise -> what to change. A new run clears the last result at once,
-// so a failed one never leaves an old answer (or its download) on the page.
+// so a failed one never leaves an old answer (or its download) on the page; so does a change of any input, and
+// an answer whose inputs changed while it computed is not shown.
 "use strict";
 const $ = (id) => document.getElementById(id);
 const FONT = { size: 12 };
@@ -10,6 +11,9 @@ const LAYOUT = { margin: { l: 56, r: 12, t: 56, b: 46 }, font: FONT,
 const WORDS = { "--trays": "tray test", "--fit": "keys to fit", "--set": "settings of the test",
   "--granules": "granules per evaluation", "--width": "working width wanted", "--scene": "scene",
   "--budget": "search budget", "--seed": "seed" };
+
+const INPUTS = ["scene", "sets", "trays", "keys", "granules", "width"];
+let generation = 0;  // counts the changes of the inputs: an answer is shown only for the inputs shown
 
 function lines(text) {
   return text.split("\n").map((l) => l.trim()).filter((l) => l);
@@ -34,8 +38,17 @@ async function body() {
   return { scene: $("scene").value, set, trays: await file.text(), fit: lines($("keys").value) };
 }
 
+function changed() {  // an input changed: what is shown (or computing) no longer answers the page's inputs
+  generation += 1;
+  if (document.body.dataset.fitted || document.body.dataset.advised) {
+    clear();
+    $("error").textContent = "the inputs changed: the last result is cleared; run it again";
+  }
+}
+
 async function run(kind) {
   clear();
+  const mine = ++generation;
   $("error").textContent = "";
   for (const id of ["start", "advise"]) $(id).disabled = true;
   try {
@@ -58,9 +71,14 @@ async function run(kind) {
       "fitting, then searching the settings (one to three minutes)...";
     const data = await api("/api/" + kind, { method: "POST", headers: { "Content-Type": "application/json" },
       body: JSON.stringify(request) });
+    if (mine !== generation) {
+      $("error").textContent = "the inputs changed while it computed: not shown; run it again";
+      return;
+    }
     if (kind === "fit") showFit(data.fit, data);
     else showAdvice(data);
   } catch (err) {
+    if (mine !== generation) return;  // the inputs changed since: the page says so already
     clear();
     $("error").textContent = inPageWords(err.message, WORDS);
   } finally {
@@ -142,6 +160,7 @@ function draw(p, t) {
 async function init() {
   const data = await api("/api/scenes");
   for (const name of data.scenes) $("scene").add(new Option(name, name, false, name === "paper"));
+  for (const id of INPUTS) for (const kind of ["input", "change"]) $(id).addEventListener(kind, changed);
   $("start").addEventListener("click", () => run("fit"));
   $("advise").addEventListener("click", () => run("advise"));
 }

@@ -4,6 +4,7 @@
 // drafts (the two pilot runs), its release (pointer, key or change) and a short pause by the settled answer;
 // a typed value is checked before anything is sent (an empty or out-of-range field is never sent); a newer
 // request aborts the one in flight (the server stops it too), except that drafts wait for the draft in flight;
+// typing in a field, and loading a scene, abort it too (its answer would not answer what is shown);
 // while an answer is computing, and after an error, the pictures are greyed out and labelled.
 "use strict";
 const $ = (id) => document.getElementById(id);
@@ -61,12 +62,21 @@ function stale(text) {  // grey the pictures out and say why; null: they answer 
   document.body.dataset.stale = text === null ? "no" : "yes";
 }
 
+function supersede() {  // the controls shown are no longer what is computing: stop it, drop what waits
+  clearTimeout(state.timer);
+  state.waiting = null;
+  if (state.inflight) {
+    state.inflight.abort();
+    state.inflight = null;  // its answer, or its abort, changes nothing on the page
+    $("status").textContent = "";
+  }
+}
+
 function run(mode) {  // the controls changed (mode draft) or settled (full, precise)
   clearTimeout(state.timer);
   const bad = problems();
   if (bad.length) {
-    if (state.inflight) state.inflight.abort();
-    state.waiting = null;
+    supersede();
     $("error").textContent = bad.join("\n");
     stale("not updated: " + bad[0]);
     return;
@@ -268,7 +278,7 @@ function buildControls(info) {
       });
     }
     number.addEventListener("input", () => {  // typing: checked at once, sent after a pause or on enter
-      clearTimeout(state.timer);
+      supersede();  // an answer for the value before the typing would not answer the field shown
       const bad = problems();
       if (bad.length) { $("error").textContent = bad.join("\n"); stale("not updated: " + bad[0]); return; }
       $("error").textContent = "";
@@ -285,6 +295,8 @@ function buildControls(info) {
 }
 
 async function selectScene(body) {
+  supersede();  // the old scene's answer would not answer the scene being loaded
+  stale("not updated yet: loading the scene");
   try {
     const info = await post("/api/scene", body);
     state.info = info;
@@ -294,6 +306,7 @@ async function selectScene(body) {
     $("error").textContent = "";
     run("full");
   } catch (err) {
+    if (body.yaml !== undefined) $("upload").value = "";  // the refused file is not the scene shown
     $("error").textContent = pageWords(err.message);
     stale("not updated: " + pageWords(err.message));
   }
