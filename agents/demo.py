@@ -43,6 +43,7 @@ DEFAULT_TARGET_M = 4.5  # the published settings reach 3.5 m (full model); see d
 DEFAULT_BUDGET = 200
 DEFAULT_GRANULES = 2000
 POLICY_PATH = Path("runs/policy/model.zip")
+MIN_GRANULES = 10  # fewer land too few granules on the trays for a CV
 
 
 @dataclass
@@ -113,8 +114,8 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
     started = time.perf_counter()
     if budget < 1:
         raise SpreadgymError(f"--budget must be at least 1 simulation, got {budget}")
-    if granules < 10:
-        raise SpreadgymError(f"--granules must be at least 10, got {granules}")
+    if granules < MIN_GRANULES:
+        raise SpreadgymError(f"--granules must be at least {MIN_GRANULES}, got {granules}")
     # the job, as a scene (full model) and as an env context (search model)
     base = load_scene("paper", {"pattern.target_swath_m": float(target_m), "sim.granules": int(granules)})
     env = make_env(DESIGN_ENV, {"granules": int(granules), "model": SEARCH_MODEL,
@@ -190,7 +191,7 @@ def run_demo(out: Path, target_m: float = DEFAULT_TARGET_M, budget: int = DEFAUL
 
 def _policy_column(path: Path, ctx, base, granules: int, steps: int, required: bool) -> Optional[Column]:
     try:
-        policy = load_policy(path)
+        policy = load_policy(path, flag="--policy")
         kwargs = {k: v for k, v in policy.env_kwargs.items() if k != "granules"}
         env = make_env(policy.env_id, {**kwargs, "granules": int(granules)})
         if "SpinnerDesign" not in policy.env_id:

@@ -63,8 +63,9 @@ def load_any_policy(given, env_id: Optional[str] = None) -> Policy:
     file = path / "model.zip" if path.is_dir() else path
     if not file.is_file():
         raise SpreadgymError(f"--model {given}: no such file, and not a callable module:function")
-    _check_sb3_zip(file, given)
-    from spreadgym.agents.training import CHECKPOINT_RE, load_policy
+    from spreadgym.agents.training import CHECKPOINT_RE, check_sb3_zip, load_policy
+
+    check_sb3_zip(file, given)
 
     in_checkpoints = CHECKPOINT_RE.match(file.name) and file.parent.name == "checkpoints"
     run_dir = file.parent.parent if in_checkpoints else file.parent
@@ -121,14 +122,6 @@ def _callable_policy(module: str, name: str, text: str, env_id: Optional[str]) -
         return np.asarray(function(obs), dtype=np.float32)
 
     return Policy(text, text, act, env_id or DEFAULT_ENV, {}, "callable")
-
-
-def _check_sb3_zip(file: Path, given) -> None:
-    if not zipfile.is_zipfile(file):
-        raise SpreadgymError(f"--model {given}: not a saved stable-baselines3 policy (not a zip file)")
-    with zipfile.ZipFile(file) as zf:
-        if "data" not in zf.namelist() or "policy.pth" not in zf.namelist():
-            raise SpreadgymError(f"--model {given}: not a saved stable-baselines3 policy (no data/policy.pth)")
 
 
 def _algo_of(data: dict) -> Optional[str]:

@@ -54,6 +54,28 @@ ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu", "gelu", "silu")
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 
 
+MAX_LAYERS, MAX_UNITS = 16, 4096  # far above any policy a design task needs; beyond, memory runs out first
+
+
+def check_net_arch(net_arch: Any) -> None:
+    """`policy_kwargs.net_arch`: a list of layer widths (whole numbers in [1, MAX_UNITS], at
+    most MAX_LAYERS), or a mapping of SB3's networks (pi, vf, qf) to such lists; else a
+    ValueError naming it and the allowed range."""
+    def layers(key: str, widths: Any) -> None:
+        if not isinstance(widths, list) or len(widths) > MAX_LAYERS or not all(
+                isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= MAX_UNITS for w in widths):
+            raise ValueError(f"{key}: expected a list of at most {MAX_LAYERS} layer widths, whole numbers in "
+                             f"[1, {MAX_UNITS}], got {widths!r}")
+
+    if isinstance(net_arch, dict):
+        for name, widths in net_arch.items():
+            if name not in ("pi", "vf", "qf"):
+                raise ValueError(f"net_arch.{name}: unknown network; known: pi, vf, qf")
+            layers(f"net_arch.{name}", widths)
+    else:
+        layers("net_arch", net_arch)
+
+
 def batched_refusal(env_kwargs: dict[str, Any]) -> Optional[str]:
     """Why the SpinnerDesign vector env cannot take these env_kwargs, or None if it can:
     gym.make's own keys (max_episode_steps, disable_env_checker) wrap a single env and are
@@ -139,10 +161,12 @@ class RunConfig(StrictModel):
 
     @field_validator("policy_kwargs")
     @classmethod
-    def _activation(cls, value: dict) -> dict:
+    def _policy_kwargs(cls, value: dict) -> dict:
         act = value.get("activation_fn")
         if act is not None and act not in ACTIVATIONS:
             raise ValueError(f"activation_fn: unknown {act!r}; known: {', '.join(ACTIVATIONS)}")
+        if "net_arch" in value:
+            check_net_arch(value["net_arch"])
         return value
 
     @model_validator(mode="after")

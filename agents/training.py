@@ -47,6 +47,7 @@ from spreadgym.agents.run_config import (
     validate_config,
 )
 from spreadgym.agents.training_env import WORKER_GONE, check_env_kwargs, make_training_env, worker_failure
+from spreadgym.config.base import first_line
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.errors import ConfigError, SpreadgymError
 
@@ -212,8 +213,8 @@ def train(algo: str, out_dir: Path, config_path: Optional[Path] = None, override
     kwargs = model_kwargs(cfg)
     try:  # the constructor checks the hyperparameter values before any worker starts
         cls(cfg.policy, _spaces_env(*spaces), device="cpu", **kwargs)
-    except (TypeError, ValueError, AssertionError) as exc:
-        raise SpreadgymError(f"{algo} hyperparameters: {exc}") from None
+    except (TypeError, ValueError, AssertionError, RuntimeError) as exc:  # RuntimeError: torch's own refusals
+        raise SpreadgymError(f"{algo} hyperparameters: {first_line(exc)}") from None
 
     out_dir.mkdir(parents=True, exist_ok=True)
     total = cfg.n_timesteps
@@ -381,29 +382,44 @@ class SavedPolicy:
         return action
 
 
-def load_policy(path) -> SavedPolicy:
-    """A policy saved by `train`: DIR/model.zip (or DIR, or a checkpoint zip), with the run's
-    config.yaml and VecNormalize statistics. Anything else is a SpreadgymError naming the path."""
-    path = Path(path)
-    given = path
-    if path.is_dir():
-        path = path / "model.zip"
-    if not path.is_file():
-        raise SpreadgymError(f"--model {given}: no such file (expected DIR/model.zip written by spreadgym train)")
-    if not zipfile.is_zipfile(path):
-        raise SpreadgymError(f"--model {given}: not a saved stable-baselines3 policy (not a zip file)")
-    with zipfile.ZipFile(path) as zf:
+def check_sb3_zip(file: Path, given, flag: str = "--model") -> None:
+    """A SpreadgymError naming `flag` and `given` unless `file` is a zip holding a saved
+    stable-baselines3 policy (data and policy.pth)."""
+    if not zipfile.is_zipfile(file):
+        raise SpreadgymError(f"{flag} {given}: not a saved stable-baselines3 policy (not a zip file)")
+    with zipfile.ZipFile(file) as zf:
         if "data" not in zf.namelist() or "policy.pth" not in zf.namelist():
-            raise SpreadgymError(f"--model {given}: not a saved stable-baselines3 policy (no data/policy.pth)")
+            raise SpreadgymError(f"{flag} {given}: not a saved stable-baselines3 policy (no data/policy.pth)")
+
+
+def saved_policy_file(path, flag: str = "--model") -> tuple[Path, Path]:
+    """(model zip, run folder) of a policy saved by `train` (DIR/model.zip, DIR or a
+    checkpoint zip), checked without loading it: the file, its contents and the run's
+    config.yaml. Anything else is a SpreadgymError naming `flag` and the path."""
+    given = Path(path)
+    path = given / "model.zip" if given.is_dir() else given
+    if not path.is_file():
+        raise SpreadgymError(f"{flag} {given}: no such file (expected DIR/model.zip written by spreadgym train)")
+    check_sb3_zip(path, given, flag)
     match = CHECKPOINT_RE.match(path.name)
     run_dir = path.parent.parent if match and path.parent.name == "checkpoints" else path.parent
+    if not (run_dir / "config.yaml").is_file():
+        raise SpreadgymError(f"{flag} {given}: {run_dir / 'config.yaml'} is missing (the run's config, written by "
+                             "train)")
+    return path, run_dir
+
+
+def load_policy(path, flag: str = "--model") -> SavedPolicy:
+    """A policy saved by `train` (`saved_policy_file`), with the run's config.yaml and
+    VecNormalize statistics. Anything else is a SpreadgymError naming `flag` and the path."""
+    given = Path(path)
+    path, run_dir = saved_policy_file(given, flag)
+    match = CHECKPOINT_RE.match(path.name)
     config_path = run_dir / "config.yaml"
-    if not config_path.is_file():
-        raise SpreadgymError(f"--model {given}: {config_path} is missing (the run's config, written by train)")
     raw = read_config(config_path)
     algo = str(raw.get("algo", "")).lower()
     if algo not in ALGOS:
-        raise SpreadgymError(f"--model {given}: {config_path} names no known algo ({raw.get('algo')!r})")
+        raise SpreadgymError(f"{flag} {given}: {config_path} names no known algo ({raw.get('algo')!r})")
     cfg = validate_config(algo, raw, str(config_path))
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
@@ -412,13 +428,13 @@ def load_policy(path) -> SavedPolicy:
     try:
         model = algo_class(algo).load(path, device="cpu")
     except Exception as exc:
-        raise SpreadgymError(f"--model {given}: could not load a {algo} policy ({type(exc).__name__}: {exc})") from None
+        raise SpreadgymError(f"{flag} {given}: could not load a {algo} policy ({type(exc).__name__}: {exc})") from None
     obs_rms = None
     if cfg.normalize_kwargs is not None:
         stats = (checkpoint_files(path.parent, int(match.group(1))).vecnormalize if match
                  else run_dir / "vecnormalize.pkl")
         if not stats.is_file():
-            raise SpreadgymError(f"--model {given}: the run normalised observations but {stats} is missing")
+            raise SpreadgymError(f"{flag} {given}: the run normalised observations but {stats} is missing")
         with open(stats, "rb") as handle:
             obs_rms = pickle.load(handle)
         obs_rms.training = False

@@ -132,7 +132,8 @@ class OutFolder:
     @contextmanager
     def writing(self) -> Iterator[Path]:
         """The folder, created (with its stamp, where it has none) now; what this run
-        created there is removed if the block fails (unless the command keeps finished parts)."""
+        created there is removed if the block fails (unless the command keeps finished parts
+        and wrote some: a stamp alone is removed)."""
         path = Path(self.path)
         missing = [p for p in (path, *path.absolute().parents) if not p.exists()]
         before = set() if missing else set(os.listdir(path))
@@ -142,7 +143,8 @@ class OutFolder:
                 write_atomic(path / STAMP, self.command + "\n")
             yield path
         except BaseException:
-            if not self.keeps_partial:
+            stamp_only = set(os.listdir(path)) - before <= {STAMP}  # nothing finished to keep
+            if not self.keeps_partial or stamp_only:
                 _remove_new(path, missing[-1] if missing else None, before)
             raise
 
@@ -172,11 +174,11 @@ def _remove_new(path: Path, made: Optional[Path], before: set) -> None:
         shutil.rmtree(made, ignore_errors=True)
         return
     for name in set(os.listdir(path)) - before:
-            target = path / name
-            if target.is_dir() and not target.is_symlink():
-                shutil.rmtree(target, ignore_errors=True)
-            else:
-                target.unlink(missing_ok=True)
+        target = path / name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target, ignore_errors=True)
+        else:
+            target.unlink(missing_ok=True)
 
 
 def _is_among(name: Path, targets: Sequence[Path]) -> bool:

@@ -48,7 +48,7 @@ def _loaded(path: str, digest: str):
 
     from spreadgym.agents.training import load_policy
 
-    policy = load_policy(path)
+    policy = load_policy(path, flag="--policy")
     if not policy.env_id.endswith(DESIGN_ENV):
         raise SpreadgymError(f"--policy {path}: trained on {policy.env_id}; a chart needs a {DESIGN_ENV} policy")
     return policy, gymnasium.make(policy.env_id, **policy.env_kwargs).unwrapped

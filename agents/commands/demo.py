@@ -22,7 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"target swath in m, on the 0.5 m tray grid (default {demo.DEFAULT_TARGET_M:g})")
     parser.add_argument("--budget", type=arguments.COUNT, default=demo.DEFAULT_BUDGET, metavar="N",
                         help=f"CMA-ES simulations on the {demo.SEARCH_MODEL} model (default {demo.DEFAULT_BUDGET})")
-    parser.add_argument("--granules", type=arguments.GRANULES, default=demo.DEFAULT_GRANULES, metavar="N",
+    parser.add_argument("--granules", type=arguments.integer(demo.MIN_GRANULES, 1_000_000),
+                        default=demo.DEFAULT_GRANULES, metavar="N",
                         help=f"granules per simulation, search and full model (default {demo.DEFAULT_GRANULES})")
     parser.add_argument("--seed", type=arguments.SEED, default=0, help="seed of the search (default 0)")
     policy = parser.add_mutually_exclusive_group()
@@ -42,6 +43,10 @@ def run(args: argparse.Namespace) -> int:
     from spreadgym.report import print_json
 
     started = time.perf_counter()
+    if args.policy is not None:  # before the work: a policy it cannot show would waste it
+        from spreadgym.agents.training import saved_policy_file
+
+        saved_policy_file(args.policy, flag="--policy")
     policy = None if args.no_policy else (args.policy or demo.POLICY_PATH)
     out = OutFolder(args.out, "demo", demo.OUTPUTS, named_files(args.policy), args.force, marker=demo.OUTPUTS[2])
     out.check()

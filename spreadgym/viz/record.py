@@ -11,6 +11,7 @@ import io
 from pathlib import Path
 
 from spreadgym.errors import SpreadgymError
+from spreadgym.out_folder import folder_problem
 from spreadgym.report import machine_lines, setting_lines, stamp, swath_text, with_error
 
 REPORT_SUFFIXES = (".html", ".pdf")
@@ -97,6 +98,9 @@ def check_report_path(path: Path, inputs: list[Path]) -> Path:
         raise SpreadgymError(f"--report {path}: the folder {path.parent} does not exist")
     if path.is_dir():
         raise SpreadgymError(f"--report {path}: a folder, not a file")
+    problem = folder_problem(path.parent)  # before the run: a report it cannot write would waste it
+    if problem is not None:
+        raise SpreadgymError(f"--report {path}: {problem}")
     if any(p.exists() and p.resolve() == path.resolve() for p in inputs):
         raise SpreadgymError(f"--report {path}: would replace an input of the run; give another file")
     return path

@@ -313,3 +313,20 @@ def test_a_search_believes_what_fresh_samples_give(method):
     scores = np.array([row.cv_percent] + [r.cv_percent for r in fresh])
     fresh_se = np.sqrt(sum(r.cv_standard_error_percent ** 2 for r in [row, *fresh])) / scores.size
     assert abs(belief - scores.mean()) < 3 * np.hypot(belief_se, fresh_se)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda folder: folder / "missing.zip", "--policy {}: no such file"),
+    (lambda folder: (folder / "notes.txt", (folder / "notes.txt").write_text("hi"))[0],
+     "--policy {}: not a saved stable-baselines3 policy (not a zip file)"),
+])
+def test_demo_refuses_a_bad_policy_by_its_flag_before_any_work(capsys, tmp_path, make, message):
+    policy = make(tmp_path)
+    code, out, err = run_cli(capsys, ["demo", "--policy", str(policy), "--out", str(tmp_path / "demo")])
+    assert code == 2 and message.format(policy) in err and len(err.strip().splitlines()) == 1
+    assert "[1/" not in err and not (tmp_path / "demo").exists()
+
+
+def test_demo_states_the_granules_it_takes(capsys, tmp_path):
+    code, _, err = run_cli(capsys, ["demo", "--granules", "5", "--out", str(tmp_path / "demo")])
+    assert code == 2 and "allowed: in [10, 1000000]" in err

@@ -37,6 +37,17 @@ def test_resumed_outputs_are_kept_when_interrupted(tmp_path):
     assert (tmp_path / "run" / "checkpoint.zip").is_file()
 
 
+def test_a_run_that_fails_before_any_output_leaves_no_stamp_only_folder(tmp_path):
+    with pytest.raises(SpreadgymError), OutFolder(tmp_path / "run", "train", keeps_partial=True).writing():
+        raise SpreadgymError("a bad hyperparameter, found once the folder was made")
+    assert not (tmp_path / "run").exists()
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "mine.txt").write_text("kept")
+    with pytest.raises(SpreadgymError), OutFolder(tmp_path / "old", "train", keeps_partial=True).writing():
+        raise SpreadgymError("again")
+    assert sorted(p.name for p in (tmp_path / "old").iterdir()) == ["mine.txt"]  # its stamp gone, the rest kept
+
+
 @pytest.mark.parametrize("make, words", [
     (lambda d: (d / STAMP).write_text("chart\n"), "holds the outputs of `spreadgym chart`; add --force"),
     (lambda d: (d / "x.json").write_text("mine"), "holds files of the same names (x.json); add --force"),

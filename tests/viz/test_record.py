@@ -40,6 +40,12 @@ def test_a_bad_report_path_is_refused_before_the_work(tmp_path, capsys, name, me
     assert message in err and len(err.strip().splitlines()) == 1
 
 
+def test_a_report_in_a_folder_that_takes_no_file_is_refused_before_the_work(capsys):
+    assert main(["simulate", "--scene", "paper", *SMALL, "--report", "/proc/record.html"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot write in /proc" in err and len(err.strip().splitlines()) == 1
+
+
 def test_a_report_never_replaces_the_scene_file(tmp_path, capsys):
     from spreadgym.config.resources import resolve_named
 
