@@ -19,6 +19,9 @@ METHODS = ("published", "centre", "random-action", "random", "grid", "cmaes", "o
 DEFAULT_METHODS = ("published", "random", "grid", "cmaes", "optuna")
 
 
+MAX_RUNS = 1000  # seeds or episodes: rliable's intervals are tight long before; the task list is held whole
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from spreadgym.agents.baselines import DEFAULT_BUDGET
 
@@ -33,11 +36,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"simulations per job for each search (default {DEFAULT_BUDGET})")
     parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS), choices=METHODS, metavar="METHOD",
                         help=f"baselines to run (default: {', '.join(DEFAULT_METHODS)}; also centre, random-action)")
-    parser.add_argument("--seeds", type=arguments.COUNT, default=1, metavar="N",
+    parser.add_argument("--seeds", type=arguments.integer(1, MAX_RUNS), default=1, metavar="N",
                         help="runs of each baseline, seeds --seed ... --seed + N - 1, each scored on its own "
-                             "samples (default 1)")
-    parser.add_argument("--episodes", type=arguments.COUNT, default=1, metavar="N",
-                        help="scoring episodes per job and run, each on another granule sample (default 1)")
+                             f"samples (default 1, at most {MAX_RUNS})")
+    parser.add_argument("--episodes", type=arguments.integer(1, MAX_RUNS), default=1, metavar="N",
+                        help="scoring episodes per job and run, each on another granule sample (default 1, at "
+                             f"most {MAX_RUNS})")
     parser.add_argument("--granules", type=arguments.GRANULES, metavar="N",
                         help="granules per simulation (default: the env's, the scene's sim.granules, 2048 on the "
                              "paper scene)")

@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=arguments.integer(1, 65535), default=DEFAULT_PORT,
                         help=f"port (default {DEFAULT_PORT})")
     arguments.add_materials_flag(parser)
-    parser.add_argument("--charts", type=Path, default=Path("out/charts"), metavar="DIR",
+    parser.add_argument("--charts", type=arguments.output_folder, default=Path("out/charts"), metavar="DIR",
                         help="chart folders the chart page shows and where its jobs write (default out/charts)")
     parser.add_argument("--time-limit", type=arguments.real(1.0, 86400.0), default=TIME_LIMIT_S, metavar="S",
                         help=f"a simulation's or fit's wait and work, at most S seconds (default {TIME_LIMIT_S:g})")

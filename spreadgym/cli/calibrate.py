@@ -22,7 +22,8 @@ from spreadgym.report import format_table, print_json
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mass", type=float, metavar="KG", help=f"granule mass, kg, in (0, {MAX_GRANULE_MASS_KG:g}]")
     parser.add_argument("--restitution", type=float, metavar="E", help="restitution, in (0, 1]")
-    parser.add_argument("--contact-time", type=float, metavar="S", help="contact time, s")
+    parser.add_argument("--contact-time", type=float, metavar="S",
+                        help=f"contact time, s, in [{cal.CONTACT_TIME_RANGE_S[0]:g}, {cal.CONTACT_TIME_RANGE_S[1]:g}]")
     parser.add_argument("--fertilizer", metavar="NAME", help="library fertilizer (pair mode)")
     parser.add_argument("--surface", metavar="NAME", help="library surface (pair mode)")
     parser.add_argument(
@@ -38,8 +39,8 @@ MAX_GRANULE_MASS_KG = 1e-2  # a 20 mm sphere of 2000 kg/m3 is 8e-3 kg
 
 def granule_mass(value) -> float:
     """--mass checked: positive and no heavier than a fertilizer granule can be."""
-    mass = cal.check_positive(value, "--mass")
-    if mass > MAX_GRANULE_MASS_KG:
+    mass = cal.check_finite(value, "--mass")
+    if not 0.0 < mass <= MAX_GRANULE_MASS_KG:
         raise cal.CalibrationError("--mass", mass, f"outside (0, {MAX_GRANULE_MASS_KG:g}] kg: not a fertilizer granule")
     return mass
 
@@ -197,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
         )
     mass = granule_mass(args.mass)
     e = cal.check_restitution(args.restitution, "--restitution")
-    t = cal.check_positive(args.contact_time, "--contact-time")
+    t = cal.check_contact_time(args.contact_time, "--contact-time")
     payload = _contact_payload(mass, cal.spring_dashpot(mass, e, t))
     if args.json:
         print_json(payload)

@@ -273,9 +273,22 @@ def _library(raws: list[tuple[str, dict]]) -> MaterialLibrary:
         except ConfigError as exc:
             key = ".".join(part for part in ("fertilizers", name, exc.key) if part)
             raise ConfigError(key, f"{exc.message} (in {origin[name]})") from None
+        _check_pair_surfaces(name, spec, surfaces, origin[name])
         fertilizers[name] = Fertilizer.from_spec(name, spec)
     user = {name: {k: v for k, v in entries[name].items() if k != "provenance"} for name in sorted(touched)}
     return MaterialLibrary(fertilizers=fertilizers, surfaces=surfaces, sources=sources, user_entries=user)
+
+
+def _check_pair_surfaces(name: str, spec: FertilizerSpec, surfaces: Mapping[str, str], label: str) -> None:
+    """Every surface of a fertilizer's pair tables is one the library lists or its friction
+    table gives (a new surface is introduced by its friction); else a ConfigError naming it
+    (a misspelt surface would otherwise be kept and never used)."""
+    known = {**dict.fromkeys(surfaces), **dict.fromkeys(spec.friction)}
+    for quantity in PAIR_QUANTITIES[1:]:
+        for surface in getattr(spec, quantity) or {}:
+            if surface not in known:
+                raise ConfigError(f"fertilizers.{name}.{quantity}.{surface}",
+                                  f"unknown surface (in {label}); known: {', '.join(sorted(known))}")
 
 
 MATERIALS_ENV = "SPREADGYM_MATERIALS"

@@ -53,6 +53,21 @@ class NumberLoader(yaml.SafeLoader):
         _expanded_size(node, 0, {})
         return node
 
+    def construct_mapping(self, node, deep=False):
+        """A mapping whose own keys are distinct: a key given twice (the second silently
+        winning in plain YAML) is an error at its line; keys a merge (`<<`) brings may be
+        overridden, as YAML intends."""
+        if isinstance(node, yaml.MappingNode):
+            seen = set()
+            for key, _ in node.value:
+                if isinstance(key, yaml.ScalarNode) and key.tag != "tag:yaml.org,2002:merge":
+                    if key.value in seen:
+                        raise yaml.constructor.ConstructorError(
+                            None, None, f"the key {key.value!r} is given twice in one mapping; give it once",
+                            key.start_mark)
+                    seen.add(key.value)
+        return super().construct_mapping(node, deep)
+
 
 def _too_many() -> str:
     return f"holds more than {MAX_YAML_NODES} values (aliases counted as copies); allowed: at most {MAX_YAML_NODES}"

@@ -195,6 +195,8 @@ def _header(names: list[str], line: int, fail) -> tuple[dict[str, int], dict[str
 def _number(text: str, name: str, separator: str, fail, line: int) -> float:
     typed = text.replace(",", ".", 1) if separator != "," and text.count(",") == 1 and "." not in text else text
     try:
+        if "_" in typed:  # Python's float() reads 1_0 as 10: a spreadsheet's cell never means that
+            raise ValueError
         value = float(typed)
     except ValueError:
         raise fail(line, f"{name} {brief(text)} is not a number") from None
@@ -205,6 +207,8 @@ def _number(text: str, name: str, separator: str, fail, line: int) -> float:
 
 def _lane(text: str, fail, line: int) -> int:
     try:
+        if "_" in text:  # as in `_number`
+            raise ValueError
         j = int(text)
     except ValueError:
         raise fail(line, f"pass {brief(text)} is not a whole number (the lane index j)") from None

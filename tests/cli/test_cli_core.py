@@ -96,9 +96,11 @@ def _with(flag, value):
         (_with("--restitution", "1.3"), r"--restitution: 1.3 outside (0, 1]"),
         (_with("--restitution", "-0.1"), r"--restitution: -0.1 outside (0, 1]"),
         (_with("--restitution", "nan"), r"--restitution: nan is not a finite number"),
-        (_with("--mass", "0"), r"--mass: 0 outside (0, inf)"),
-        (_with("--mass", "-1"), r"--mass: -1 outside (0, inf)"),
-        (_with("--contact-time", "0"), r"--contact-time: 0 outside (0, inf)"),
+        (_with("--mass", "0"), r"--mass: 0 outside (0, 0.01] kg"),
+        (_with("--mass", "-1"), r"--mass: -1 outside (0, 0.01] kg"),
+        (_with("--mass", "0.5"), r"--mass: 0.5 outside (0, 0.01] kg"),
+        (_with("--contact-time", "0"), r"--contact-time: 0 outside [1e-07, 0.01] s"),
+        (_with("--contact-time", "0.05"), r"--contact-time: 0.05 outside [1e-07, 0.01] s"),  # materials' cap
         (["calibrate", "--mass", "2e-5", "--restitution", "0.5"], "--contact-time"),
         (["calibrate"], "--mass"),
         (["calibrate", "--paper-table", "--mass", "1e-5"], "--paper-table"),
@@ -150,3 +152,13 @@ def test_an_output_folder_is_probed_before_any_work_and_not_created(tmp_path):
                        ("/proc/spreadgym-probe", "cannot write in")):  # root passes permission bits; procfs does not
         with pytest.raises(argparse.ArgumentTypeError, match=words):
             output_folder(str(bad))
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["compare", "--seeds", "100000000", "--out", "x"], "--seeds: 100000000 is out of range; allowed: in [1, 1000]"),
+    (["compare", "--episodes", "0", "--out", "x"], "--episodes: 0 is out of range; allowed: in [1, 1000]"),
+    (["serve", "--charts", __file__], "is a file, not a folder"),
+])
+def test_counts_and_folders_that_cannot_work_are_refused_at_the_flag(capsys, argv, text):
+    assert main(argv) == 2
+    assert text in capsys.readouterr().err

@@ -119,6 +119,11 @@ def test_yaml_limits_are_one_line_each(tmp_path):
         with pytest.raises(ConfigError) as err:
             read_yaml(path)
         assert err.value.key == str(path) and fragment in err.value.message and "\n" not in str(err.value), name
+    path = tmp_path / "twice.yaml"
+    path.write_text("spinner:\n  rpm: 500\n  rpm: 600\n")  # plain YAML keeps the last silently
+    with pytest.raises(ConfigError, match="line 3, column 3: the key 'rpm' is given twice"):
+        read_yaml(path)
+    assert parse_yaml("a: &a {b: 1, c: 2}\nd:\n  <<: *a\n  b: 3\n")["d"] == {"b": 3, "c": 2}  # a merged key: overridden
     assert parse_yaml("[" * MAX_YAML_DEPTH + "]" * MAX_YAML_DEPTH) is not None  # at the limit: fine
     shared = "a: &a [1, 2, 3]\nb: [*a, *a, *a]\n"
     assert parse_yaml(shared) == {"a": [1, 2, 3], "b": [[1, 2, 3]] * 3}  # aliases within the limit: fine

@@ -161,6 +161,7 @@ def test_a_user_materials_file_merges_over_the_library(tmp_path):
     ("    particle_density_kg_m3: -5\n", "fertilizers.bad.particle_density_kg_m3: Input should be greater than 0"),
     ("    size: {d50_m: 0.003, sd_m: 0.001, min_m: 0.004, max_m: 0.005}\n", "sizes out of order"),
     ("    restitution: {mc: 1.5}\n", "fertilizers.bad.restitution.mc: 1.5 outside [0, 1]"),
+    ("    restitution: {mc: 0.4, mcc: 0.2}\n", "fertilizers.bad.restitution.mcc: unknown surface"),
 ])
 def test_a_bad_user_fertilizer_is_one_line_naming_the_key(tmp_path, entry, message):
     base = {"particle_density_kg_m3": "    particle_density_kg_m3: 1500\n",
@@ -199,3 +200,9 @@ def test_spreadgym_materials_is_the_default_users_file(copied_fertilizer, monkey
     monkeypatch.setenv(MATERIALS_ENV, str(path.parent / "missing.yaml"))
     with pytest.raises(ConfigError, match="SPREADGYM_MATERIALS: .*missing.yaml: file not found"):
         load_library()
+
+
+def test_a_new_surface_comes_with_its_friction(tmp_path):
+    user = tmp_path / "own.yaml"
+    user.write_text("fertilizers:\n  pellet:\n    friction: {glass: 0.3}\n    restitution: {glass: 0.5}\n")
+    assert load_library(extra=user).fertilizer("pellet").pair("restitution", "glass") == 0.5

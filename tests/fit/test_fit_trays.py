@@ -48,6 +48,8 @@ def test_pass_column_and_round_trip(tmp_path):
     ("x_m,mass_g\n0,1\n0.5,1\n1,0\n1.5,0\n2,0\n", "line 6: 2 trays caught anything; at least 5 must"),
     ("x_m,mass_g\n0,1,3\n", "line 2: 3 values for 2 columns"),
     ("x_m,mass_g,pass\n0,1,a\n", "line 2: pass 'a' is not a whole number"),
+    ("x_m,mass_g\n0,1\n0.5,1_0\n", "line 3: mass_g '1_0' is not a number"),  # float() reads it as 10
+    ("x_m,mass_g,pass\n0,1,1_0\n", "line 2: pass '1_0' is not a whole number"),
     ("x_m,mass_g\n0," + "1" * 200_000 + "\n", "line 2: longer than 10000 characters"),
     ("x_m,mass_g\n0,\"1\n", "line 2: "),
     ("x_m,mass_g\n0,1\0\n", "line 2: holds a NUL character"),
