@@ -4,6 +4,7 @@ configs and training runs are changed key by key, checked against their schema."
 from __future__ import annotations
 
 import copy
+import re
 import types
 from typing import Any, Iterable, Mapping, Optional, Union, get_args, get_origin
 
@@ -49,8 +50,17 @@ def set_in_place(tree: dict, assignments: Mapping[str, Any], schema: type[BaseMo
     for dotted, value in assignments.items():
         if not isinstance(dotted, str) or not dotted:
             raise ConfigError(str(dotted), "keys must be non-empty strings")
-        _set(tree, dotted.split("."), value, schema)
+        _set(tree, key_parts(dotted), value, schema)
     return tree
+
+
+INDEX = re.compile(r"\[(\d+)\]")
+
+
+def key_parts(dotted: str) -> list[str]:
+    """The parts of a dotted key; an index may also be written as the key reference writes
+    it (`deflectors[0].x_m` is `deflectors.0.x_m`)."""
+    return INDEX.sub(r".\1", dotted).split(".")
 
 
 def _set(tree: dict, parts: list[str], value: Any, schema: type[BaseModel]) -> None:

@@ -72,7 +72,8 @@ def schema_markdown(sections: dict[str, type[BaseModel]]) -> str:
            "Generated from the schemas by `python -m spreadgym.envs.config_doc`; do not edit by hand.",
            "Every number must be finite; `true`/`false` are not numbers and quoted text is not a number.",
            "Checks that involve several keys (the rim speed omega R <= 100 m/s, the feed inside the disc,",
-           "plates outside it, the target swath a multiple of the tray width) are stated in the errors.", ""]
+           "plates outside it, the target swath a multiple of the tray width) are stated in the errors.",
+           "`[i]` is a list index: `--set deflectors[0].x_m=0.3` and `--set deflectors.0.x_m=0.3` are the same.", ""]
     for title, model in sections.items():
         out += [f"## {title}", "", "| key | type | default | allowed | meaning |", "|---|---|---|---|---|"]
         for key, kind, default, allowed, description in rows(model):

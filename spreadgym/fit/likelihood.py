@@ -130,7 +130,7 @@ def check_covered(prediction: Prediction, test: TrayTest, where: str) -> None:
             f"--trays: {brief(test.source)}: {100 * prediction.covered_share:.0f} % of the measured mass lies in "
             f"trays the simulated pattern reaches {where}; at least {100 * MIN_COVERED_SHARE:.0f} % must, or the fit "
             "has nothing to fit (check x: 0 on the machine's track, positive to its right; the pass column; the "
-            "scene's settings and the --fit ranges)")
+            "scene's settings and the --fit ranges; --granules: too few leave trays of the simulated pattern empty)")
 
 
 def pass_frame(test: TrayTest, scene: Scene) -> np.ndarray:

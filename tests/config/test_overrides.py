@@ -46,6 +46,7 @@ def test_the_schema_not_the_tree_says_what_exists():
 
 def test_list_items_follow_the_item_schema():
     assert apply_overrides({"items": [{}]}, {"items.0.b": 4.0}, Outer) == {"items": [{"b": 4.0}]}
+    assert apply_overrides({"items": [{}]}, {"items[0].b": 4.0}, Outer) == {"items": [{"b": 4.0}]}  # the docs' form
     with pytest.raises(ConfigError, match=r"^items\.0\.c: unknown key; known keys here: a, b$"):
         apply_overrides({"items": [{}]}, {"items.0.c": 4.0}, Outer)
     with pytest.raises(ConfigError, match=r"^items\.0: the list is empty here"):
