@@ -27,6 +27,7 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 from spreadgym.config.base import Integer, Real, StrictModel, brief, validate
 from spreadgym.config.overrides import apply_overrides
 from spreadgym.config.resources import read_yaml, resolve_named
+from spreadgym.config.scene import MAX_WIND_M_S
 from spreadgym.errors import ConfigError
 
 DESIGN = "spinner_design"
@@ -91,7 +92,7 @@ class ContextConfig(StrictModel):
     @field_validator("wind_x_m_s", "wind_y_m_s")
     @classmethod
     def _wind(cls, v):
-        return _check_range(v, -30.0, 30.0, "m/s")
+        return _check_range(v, -MAX_WIND_M_S, MAX_WIND_M_S, "m/s")  # the scene's own bound
 
     @field_validator("held_out_swath_m")
     @classmethod

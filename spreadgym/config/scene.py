@@ -229,7 +229,7 @@ class Sim(StrictModel):
     angle_copies: Integer = Field(default=32, ge=1, le=256,
                               description="release angles per simulated granule: each spinner run is reused "
                                           "at this many release angles drawn from the feed spot, exactly "
-                                          "(docs/estimate.md); 1 for none; plates, wind, forward speed and a point "
+                                          "(docs/estimate.md); 1 for none; wind, forward speed and a point "
                                           "feed take 1")
 
 
@@ -319,6 +319,18 @@ class Scene(StrictModel):
             raise ValueError(f"sim.granules: {self.sim.granules} x sim.angle_copies {self.sim.angle_copies}{discs} "
                              f"= {copies} landing points per run; allowed: at most {MAX_GRANULE_COPIES} "
                              "(lower sim.granules or sim.angle_copies)")
+        return self
+
+    @model_validator(mode="after")
+    def _one_pass_models_the_field(self) -> "Scene":
+        """Back-and-forth driving overlaps the simulated pass with its mirror image, which is
+        the return pass only where the flight is the same both ways: a wind, fixed to the
+        ground, blows the other way in a returning machine's frame, so those passes would
+        need a second flight. Not modelled: refused rather than answered wrongly."""
+        if self.pattern.driving == "back-and-forth" and any(w != 0.0 for w in self.flight.wind_m_s):
+            raise ValueError(f"flight.wind_m_s: {list(self.flight.wind_m_s)} m/s with back-and-forth driving is not "
+                             "modelled (the return passes fly in the reversed wind); allowed: [0, 0], or "
+                             "pattern.driving racetrack")
         return self
 
     @model_validator(mode="after")

@@ -1,4 +1,4 @@
-"""An unbiased estimate of the tray-test CV from independent randomised replicates.
+"""A bias-corrected estimate of the tray-test CV from independent randomised replicates.
 
 A run's granules come in K independent replicates (independent scrambles of a
 randomised quasi-Monte Carlo point set, or plain Monte Carlo draws): each replicate's
@@ -6,22 +6,18 @@ tray masses m_k (T,) are an independent, identically distributed estimate, and t
 run's pattern is their sum m = sum_k m_k. The overlapped bout at width W is b = F m
 (F the (n, T) fold matrix of `pattern.bout_pattern`).
 
-The plain CV of b is biased upwards: with b = beta + e, E[e] = 0, Cov(e) = S,
+The plain CV of b is biased upwards by the sampling noise (its between-tray variance
+and squared mean both carry it); that bias is c/K + O(1/K^2) in the replicates K,
+whatever the sampler. The corrected CV removes the first-order term with the
+delete-one-replicate jackknife,
 
-    E[sum_q (b_q - mean(b))^2] = sum_q (beta_q - mean(beta))^2 + tr(C S),
-    E[mean(b)^2]               = mean(beta)^2 + 1' S 1 / n^2,
+    CV_corrected = K CV(all K) - (K - 1) mean_j CV(all but replicate j)   (clipped at 0),
 
-C = I - 11'/n. Both sampling terms are estimated without bias from the replicates,
-whatever the sampler, because b_k = F m_k are i.i.d. with Cov(b) = K Cov(b_k):
-
-    S_hat = K / (K - 1) sum_k (b_k - b/K)(b_k - b/K)'.
-
-The corrected CV is 100 sqrt(max(s2 - tr(C S_hat)/(n - 1), 0) / (mean(b)^2 - 1'S_hat 1/n^2)):
-numerator and denominator are each unbiased; the ratio and the root leave a bias of
-order 1/N_granules squared relative to the plain CV's order 1/N (checked in the tests
-on patterns with a known exact CV). Its standard error is the delete-one-replicate
-jackknife over the K replicates (K >= 3), and the 95 % interval uses Student's t with
-K - 1 degrees of freedom.
+its standard error is the same jackknife's (K >= 3), and the 95 % interval uses
+Student's t with K - 1 degrees of freedom. docs/estimate.md, section 3, derives it and
+says why the explicit plug-in correction of the variance was not kept (unbiased in the
+variance, biased low after the root and noisier); the tests check it on patterns with
+a known exact CV.
 """
 
 from __future__ import annotations

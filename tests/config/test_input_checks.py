@@ -45,6 +45,16 @@ def test_bad_values_are_refused_with_the_key_and_the_range(assignment, key, frag
     assert "\n" not in str(err.value)
 
 
+def test_a_wind_with_back_and_forth_driving_is_refused_not_answered_wrongly():
+    """The return passes of back-and-forth driving fly in the reversed wind, which the
+    mirror image of one simulated pass does not give."""
+    with pytest.raises(ConfigError, match=r"flight.wind_m_s: \[2.0, 0.0\] m/s with back-and-forth driving is not "
+                                          r"modelled"):
+        load_scene("field", {"flight.wind_m_s": [2.0, 0.0]})
+    assert load_scene("field", {"flight.wind_m_s": [2.0, 0.0], "pattern.driving": "racetrack"}).flight.wind_m_s[0] == 2
+    assert load_scene("field", {"flight.forward_speed_m_s": 3.0}).pattern.driving == "back-and-forth"  # no wind: fine
+
+
 def test_the_rim_speed_is_bounded():
     with pytest.raises(ConfigError, match="spinner.rpm: 5000 rpm on a 0.3 m disc is a rim speed of 157 m/s"):
         load_scene("field", {"spinner.rpm": 5000})

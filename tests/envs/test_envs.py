@@ -411,6 +411,7 @@ def test_scene_overrides_reach_the_scene():
         ({"granulez": 100}, "granulez"),
         ({"reward": {"cv_wieght": 1.0}}, "reward.cv_wieght"),
         ({"context.windx": [0, 1]}, "context.windx"),
+        ({"context.wind_x_m_s": [-25.0, 25.0]}, "context.wind_x_m_s"),  # the scene's bound (20), not a later failure
         ({"granules": 0}, "granules"),
         ({"settings": {"rpm": [900, 300]}}, "settings.rpm"),
         ({"context": {"fertilizers": ["sand"]}}, "context.fertilizers"),

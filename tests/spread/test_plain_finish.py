@@ -64,7 +64,8 @@ def test_an_error_of_the_trays_is_the_single_runs(library):
 def test_only_plain_designs_are_plain(library):
     assert is_plain(plan_scene(load_scene("paper"), "auto", library))
     for name, extra in [("twin-field", {}), ("paper-deflectors", {}), ("paper", {"sim.angle_copies": 1}),
-                        ("field", {"flight.wind_m_s": [2.0, 0.0]}), ("paper", {"feed.spread_m": 0.0})]:
+                        ("field", {"flight.wind_m_s": [2.0, 0.0], "pattern.driving": "racetrack"}),
+                        ("paper", {"feed.spread_m": 0.0})]:
         assert not is_plain(plan_scene(load_scene(name, extra), "auto", library)), name
 
 

@@ -225,7 +225,7 @@ def test_a_mirrored_launch_lands_mirrored_to_the_bit(magnus):
     from spreadgym.spread.flight import fly
 
     r = run_scene(_scene({"twin": None, "flight.magnus": magnus, "flight.forward_speed_m_s": 3.0,
-                          "flight.wind_m_s": [0.0, -2.0]}), model="analytic")
+                          "flight.wind_m_s": [0.0, -2.0], "pattern.driving": "racetrack"}), model="analytic")
     gone = r.launch.departed
     args = (r.launch.position_m[gone], 0.9 + r.launch.height_m[gone],
             np.column_stack([r.launch.velocity_m_s[gone], r.launch.vertical_velocity_m_s[gone]]),
