@@ -18,7 +18,7 @@ SCENES = (  # (scene, overrides): every path of the pipeline, at a few granules 
     ("paper", {}),
     ("paper-deflectors", {}),
     ("twin-field", {}),
-    ("field", {"flight.wind_m_s": [1.0, 0.0], "flight.magnus": True}),
+    ("field", {"flight.wind_m_s": [1.0, 0.0], "flight.magnus": True, "pattern.driving": "racetrack"}),
     ("paper", {"sim.angle_copies": 1}),
 )
 GRANULES = 64
