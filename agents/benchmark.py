@@ -32,6 +32,7 @@ import os
 import sys
 import time
 import warnings
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional, Sequence
@@ -150,13 +151,24 @@ def rung_env(rung: Rung):
     return make_env(rung.env_id, {})
 
 
+def trained_record(folder: Path) -> Optional[dict]:
+    """The `trained` record of a run folder trained to its end (`stopped: done`), else None:
+    a run stopped by Ctrl-C or its time limit also writes model.zip, and is resumed, not scored."""
+    from spreadgym.agents.run_config import read_config
+
+    config = folder / "config.yaml"
+    if not ((folder / "model.zip").is_file() and config.is_file()):
+        return None
+    record = read_config(config).get("trained") or {}
+    return record if record.get("stopped") == "done" else None
+
+
 def train_run(out: Path, rung: Rung, algo: str, seed: int, log=print) -> Path:
     """Train (or resume, or find done) one PPO/SAC run of `rung`; returns its folder."""
     from spreadgym.agents.training import train
 
     folder = policy_dir(out, rung.key, algo, seed)
-    config = folder / "config.yaml"
-    if (folder / "model.zip").is_file() and config.is_file() and "stopped: done" in config.read_text():
+    if trained_record(folder) is not None:
         return folder
     settings = TRAIN_SETTINGS[algo]
     overrides = {key: value for key, value in settings.items() if key != "env_kwargs"}
@@ -169,7 +181,15 @@ def score_run(out: Path, rung: Rung, method: str, seed: int, env=None, jobs=None
     """Score run `seed` of `method` on `rung`'s held-out jobs (cached in the benchmark folder)."""
     path = score_path(out, rung, method, seed)
     done = read_json(path)
-    if done is not None:
+    trained = None
+    if method in TRAINED or method in EXACT_POLICY:
+        source, algo = EXACT_POLICY.get(method, (rung.key, method))
+        folder = policy_dir(out, source, algo, seed)
+        trained = trained_record(folder)
+        if trained is None:
+            raise SpreadgymError(f"{method} seed {seed} of {rung.key}: {folder} holds no policy trained to its end "
+                                 "(train it first: the benchmark's train part resumes it)")
+    if done is not None and (trained is None or done.get("train") == trained):  # a score of this very policy
         return done
     env = env or rung_env(rung)
     jobs = jobs or evaluation_set(env=env)
@@ -177,15 +197,11 @@ def score_run(out: Path, rung: Rung, method: str, seed: int, env=None, jobs=None
     first = seed * EPISODES
     rows: list[Row] = []
     train = None
-    if method in TRAINED or method in EXACT_POLICY:
+    if trained is not None:
         from spreadgym.agents.training import load_policy
 
-        source, algo = EXACT_POLICY.get(method, (rung.key, method))
-        folder = policy_dir(out, source, algo, seed)
-        from spreadgym.agents.run_config import read_config
-
         policy = load_policy(folder / "model.zip")
-        train = read_config(folder / "config.yaml").get("trained", {})  # steps reached, wall time
+        train = trained  # steps reached, wall time
         for ctx in jobs:
             for episode in range(first, first + EPISODES):
                 rows.append(run_policy(env, ctx, policy.act, method, episode))
@@ -281,13 +297,22 @@ def aggregate(score_dict: dict[str, np.ndarray], reps: int = BOOTSTRAP_REPS, see
     def all_aggregates(scores):
         return np.array([func(scores) for func in funcs.values()])
 
-    with warnings.catch_warnings(), _global_numpy_seed(seed):
-        warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)  # rliable -> arch 7
-        points, intervals = rly.get_interval_estimates(dict(score_dict), all_aggregates, reps=reps,
-                                                       random_state=np.random.RandomState(seed))
-    return {method: {name: (float(points[method][k]), float(intervals[method][0, k]),
-                            float(intervals[method][1, k])) for k, name in enumerate(funcs)}
-            for method in score_dict}
+    found = {}
+    for method, scores in score_dict.items():  # each its own resamples: its interval is the same beside any others
+        own = method_seed(seed, method)
+        with warnings.catch_warnings(), _global_numpy_seed(own):
+            warnings.filterwarnings("ignore", "random_state is deprecated", FutureWarning)  # rliable -> arch 7
+            points, intervals = rly.get_interval_estimates({method: scores}, all_aggregates, reps=reps,
+                                                           random_state=np.random.RandomState(own))
+        found[method] = {name: (float(points[method][k]), float(intervals[method][0, k]),
+                                float(intervals[method][1, k])) for k, name in enumerate(funcs)}
+    return found
+
+
+def method_seed(seed: int, method: str) -> int:
+    """The bootstrap seed of one method's scores: from `seed` and the method's name, so that
+    adding, removing or reordering the other methods leaves its interval as it is."""
+    return int(np.random.SeedSequence([seed, zlib.crc32(method.encode())]).generate_state(1)[0])
 
 
 def probability_of_improvement(x: np.ndarray, y: np.ndarray, reps: int = BOOTSTRAP_REPS,
@@ -310,8 +335,12 @@ def profiles(score_dict: dict[str, np.ndarray], taus=PROFILE_TAUS, reps: int = B
     """rliable's performance profiles: the share of (run, job) scores above each tau, with 95 % intervals."""
     from rliable import library as rly
 
-    with _global_numpy_seed(0):
-        return rly.create_performance_profile(dict(score_dict), taus, reps=reps)
+    distributions, intervals = {}, {}
+    for method, scores in score_dict.items():  # as `aggregate`: each method its own resamples
+        with _global_numpy_seed(method_seed(0, method)):
+            found, spread = rly.create_performance_profile({method: scores}, taus, reps=reps)
+        distributions[method], intervals[method] = found[method], spread[method]
+    return distributions, intervals
 
 
 @contextlib.contextmanager
@@ -405,12 +434,11 @@ def run_rung(out: Path, rung: Rung, methods: Optional[Sequence[str]] = None, par
             for seed in range(runs_of(rung, method)):
                 if method in TRAINED or method in EXACT_POLICY:
                     source, algo = EXACT_POLICY.get(method, (rung.key, method))
-                    if not (policy_dir(out, source, algo, seed) / "model.zip").is_file():
-                        progress(f"{rung.key}: {method} seed {seed} not trained yet")
+                    if trained_record(policy_dir(out, source, algo, seed)) is None:
+                        progress(f"{rung.key}: {method} seed {seed} not trained to its end yet")
                         continue
-                if not score_path(out, rung, method, seed).is_file():
-                    progress(f"{rung.key}: scoring {method} seed {seed}")
-                    score_run(out, rung, method, seed, env, jobs)
+                progress(f"{rung.key}: scoring {method} seed {seed} (or its score, where it is this policy's)")
+                score_run(out, rung, method, seed, env, jobs)
 
 
 def rung_speed(rung: Rung, designs: int = 32, repeats: int = 3) -> dict:

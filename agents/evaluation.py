@@ -109,18 +109,19 @@ class EvalContext:
 def evaluation_set(fertilizers: Optional[Sequence[str]] = None,
                    swaths_m: Optional[Sequence[float]] = None, env=None) -> list[EvalContext]:
     """The jobs. An env whose config has an `evaluation` section (every v1 task) gives its
-    held-out jobs, restricted to `fertilizers` and `swaths_m` where given; otherwise (v0)
+    held-out jobs, restricted to `fertilizers` and `swaths_m` where given (each keeping its
+    index in the whole set: its seeds, so its scores, are the same whatever else is picked); otherwise (v0)
     every fertilizer with every target swath (fertilizer-major order), by default the
     paper's three fertilizers at 2, 3, 4 and 5 m."""
     held_out = env.unwrapped.task.evaluation_jobs if env is not None else []
-    if held_out:
-        picked = [job for job in held_out if (not fertilizers or job.fertilizer in fertilizers)
+    if held_out:  # a job keeps its index in the whole set, so its seeds do not depend on the others picked
+        picked = [(i, job) for i, job in enumerate(held_out) if (not fertilizers or job.fertilizer in fertilizers)
                   and (not swaths_m or any(abs(job.target_swath_m - float(w)) < 1e-9 for w in swaths_m))]
         if not picked:
             raise SpreadgymError("no evaluation job of the env matches --fertilizers/--swaths; its jobs: "
                                  + ", ".join(sorted({f"{j.fertilizer} @ {j.target_swath_m:g} m" for j in held_out})))
         return [EvalContext(i, j.fertilizer, j.target_swath_m, j.spinner_material, j.forward_speed_m_s,
-                            tuple(j.wind_m_s)) for i, j in enumerate(picked)]
+                            tuple(j.wind_m_s)) for i, j in picked]
     ferts = tuple(fertilizers) if fertilizers else EVAL_FERTILIZERS
     swaths = tuple(float(s) for s in swaths_m) if swaths_m else EVAL_SWATHS_M
     jobs = [(f, s) for f in ferts for s in swaths]
@@ -288,19 +289,23 @@ def _mean_se(values: Iterable[Optional[float]]) -> Optional[float]:
     return float(math.sqrt(sum(v * v for v in vals)) / len(vals)) if vals else None
 
 
+def _job_key(row: Row) -> tuple:
+    """A job as a whole: every field of its context (jobs may differ only in wind or speed)."""
+    c = row.context
+    return (c["fertilizer"], c["target_swath_m"], c.get("spinner_material"), c.get("forward_speed_m_s"),
+            tuple(c.get("wind_m_s") or ()))
+
+
 def summarise(method: str, rows: Sequence[Row], worst_cv: float = WORST_CV_PERCENT) -> dict:
     """Means over the rows of one method. A run where nothing landed counts as CV `worst_cv`.
 
     The CV's standard error is that of the mean over the rows, from each run's own
     standard error (sampling noise; the jobs themselves are fixed)."""
-    jobs = {(r.context["fertilizer"], r.context["target_swath_m"]) for r in rows}
-    per_job_search = {}
+    jobs = {_job_key(r) for r in rows}
+    per_job_search, per_job_decide = {}, {}  # per (job, run): its episodes share one search
     for r in rows:
-        key = (r.context["fertilizer"], r.context["target_swath_m"])
+        key = (_job_key(r), r.extra.get("run", 0))
         per_job_search[key] = max(per_job_search.get(key, 0), r.search_simulations)
-    per_job_decide = {}
-    for r in rows:
-        key = (r.context["fertilizer"], r.context["target_swath_m"])
         per_job_decide[key] = max(per_job_decide.get(key, 0.0), r.decide_s)
     return {
         "method": method,

@@ -280,6 +280,12 @@ def _spaces_env(obs_space, act_space):
     return Spaces()
 
 
+def resume_seed(seed: int, steps: int) -> int:
+    """The seed of a run's part resumed at `steps`: from the run's seed and the step count,
+    so no part repeats another's contexts and granule samples."""
+    return int(np.random.SeedSequence([int(seed), int(steps)]).generate_state(1)[0] % 2**31)
+
+
 def _resume(cls, cfg, checkpoints, venv, out_dir, log):
     """Load the newest complete checkpoint (falling back to older ones if a file is broken)."""
     from stable_baselines3.common.vec_env import VecNormalize
@@ -303,6 +309,12 @@ def _resume(cls, cfg, checkpoints, venv, out_dir, log):
         for err in errors:
             log(f"skipped checkpoint {err}")
         log(f"resuming from {ck.model} ({model.num_timesteps} steps)")
+        # a seed of its own for the part after the checkpoint: seeded with the run's seed again,
+        # the envs would replay the contexts and samples of step 0 (and torch's draws would not
+        # be seeded at all); from the same checkpoint a resumed run gives the same bits
+        seed = resume_seed(cfg.seed, int(model.num_timesteps))
+        model.set_random_seed(seed)
+        env.seed(seed)
         return model, env, int(model.num_timesteps)
     raise SpreadgymError(f"{out_dir}/checkpoints: no usable checkpoint ({'; '.join(errors)})")
 

@@ -244,9 +244,13 @@ def _aggregate(env_id: str, jobs, rows: dict, order: list, summaries: list, env_
         s.update({"iqm": stats[m]["iqm"][0], "iqm_low": stats[m]["iqm"][1], "iqm_high": stats[m]["iqm"][2],
                   "mean_normalised": stats[m]["mean"][0], "cv_iqm_percent": cv[m]["iqm"][0],
                   "cv_iqm_low": cv[m]["iqm"][1], "cv_iqm_high": cv[m]["iqm"][2]})
+    single = [m for m, found in runs.items() if len(found) < 2]
+    alone = (f"; {', '.join(single)}: one run, which a bootstrap over runs cannot resample (its interval is the "
+             "point itself: give --seeds 3 or more)") if single else ""
     return {"matrices": matrices, "note": "normalised: 0 = a random action's mean reward, 1 = the best known "
                                           "setting (CMA-ES at a generous budget, docs/benchmark.md); "
-                                          "IQM over (run, job) with rliable's stratified bootstrap 95 % interval"}
+                                          "IQM over (run, job) with rliable's stratified bootstrap 95 % interval"
+                                          + alone}
 
 
 def _check_fits(policy, env) -> None:

@@ -164,6 +164,42 @@ def test_resume_continues_from_the_newest_checkpoint(trained, capsys, tmp_path):
 
 
 @pytest.mark.slow
+def test_a_resumed_part_has_seeds_of_its_own_and_the_same_bits_from_the_same_checkpoint(trained, capsys, tmp_path):
+    """Seeded with the run's seed again, the envs replayed the contexts of step 0 after a
+    checkpoint and torch's draws went unseeded: now the part after a checkpoint has its own
+    seed (from the run's seed and the step), and two resumes from one checkpoint agree."""
+    import shutil
+
+    import torch
+
+    from spreadgym.agents.training import load_policy, resume_seed
+
+    assert len({resume_seed(0, 0), resume_seed(0, 64), resume_seed(0, 96), resume_seed(1, 64)}) == 4
+    weights = []
+    for name in ("first", "second"):
+        run = tmp_path / name
+        shutil.copytree(trained, run)
+        code, _, err = run_cli(capsys, ["train", "--algo", "ppo", "--timesteps", "96", "--out", str(run)])
+        assert code == 0, err
+        weights.append(load_policy(run / "model.zip").model.policy.state_dict())
+    assert weights[0].keys() == weights[1].keys()
+    assert all(torch.equal(weights[0][key], weights[1][key]) for key in weights[0])
+    # the envs of the resumed part are seeded with its own seed, not the run's (which replayed step 0)
+    from spreadgym.agents import training
+    from spreadgym.agents.run_config import algo_class
+    from spreadgym.agents.training_env import make_training_env
+
+    cfg = training.load_run_config(trained, "ppo")
+    venv = make_training_env(cfg)
+    seeded = []
+    venv.seed = lambda seed=None: seeded.append(seed)
+    model, _, steps = training._resume(algo_class("ppo"), cfg, training.list_checkpoints(trained / "checkpoints"),
+                                       venv, tmp_path, lambda _: None)
+    assert steps == 64 and seeded[-1] == resume_seed(cfg.seed, 64) != cfg.seed  # the last before any reset
+    venv.close()
+
+
+@pytest.mark.slow
 def test_sac_resume_keeps_the_replay_buffer(capsys, tmp_path):
     from spreadgym.agents.training import load_policy
 
@@ -330,3 +366,31 @@ def test_demo_refuses_a_bad_policy_by_its_flag_before_any_work(capsys, tmp_path,
 def test_demo_states_the_granules_it_takes(capsys, tmp_path):
     code, _, err = run_cli(capsys, ["demo", "--granules", "5", "--out", str(tmp_path / "demo")])
     assert code == 2 and "allowed: in [10, 1000000]" in err
+
+
+def test_a_summary_counts_every_search_of_every_job_and_run():
+    """Jobs that differ only in wind are two jobs; each (job, run) search counts once (its
+    scoring episodes share it), and a second run's search is counted too."""
+    def row(wind, run, episode, search):
+        context = {"fertilizer": "pellet", "target_swath_m": 3.0, "spinner_material": "mc",
+                   "forward_speed_m_s": 2.0, "wind_m_s": [wind, 0.0]}
+        return ev.Row("cmaes", context, {}, [], 5.0, 0.5, 3.0, -0.1, 1.0, search, 1, 2.0, 2.5, episode,
+                      extra={"run": run})
+
+    rows = [row(w, r, e, 2) for w in (-1.0, 1.0) for r in (0, 1) for e in (0, 1)]
+    summary = ev.summarise("cmaes", rows)
+    assert summary["jobs"] == 2 and summary["episodes"] == 8
+    assert summary["simulations"] == 4 * 2 + 8  # four searches of 2, eight scoring episodes
+    assert summary["search_simulations"] == 2.0 and summary["wall_s"] == 4 * 2.0 + 8 * 0.5
+
+
+def test_a_picked_job_keeps_its_index_so_its_seeds_do_not_depend_on_the_others():
+    import gymnasium as gym
+
+    env = gym.make("spreadgym/SpinnerDesign-v1", granules=64)
+    whole = {ctx.label: ctx.index for ctx in ev.evaluation_set(env=env)}
+    last = ev.evaluation_set(env=env)[-1]
+    picked = ev.evaluation_set(fertilizers=[last.fertilizer], swaths_m=[last.target_swath_m], env=env)
+    assert picked and all(ctx.index == whole[ctx.label] for ctx in picked)
+    assert picked[-1].score_seed(0) == last.score_seed(0)
+    env.close()

@@ -39,6 +39,9 @@ def test_rliable_iqm_equals_the_hand_computed_one_on_a_small_table():
     assert found["b"]["mean"][0] == pytest.approx(131 / 12)
     again = bm.aggregate(scores, reps=500)
     assert again == found  # seeded
+    alone = bm.aggregate({"a": scores["a"]}, reps=500)
+    assert alone["a"] == found["a"]  # a method's interval does not depend on the others beside it
+    assert bm.aggregate({"b": scores["b"], "a": scores["a"]}, reps=500)["a"] == found["a"]
 
 
 def test_probability_of_improvement_equals_the_hand_counted_share():
@@ -105,6 +108,18 @@ def test_the_runner_scores_every_run_on_its_own_samples_and_resumes(tiny, tmp_pa
     for row in rows:
         assert row["iqm_low"] <= row["iqm"] <= row["iqm_high"] and row["runs"] == 2
     assert not list(tmp_path.rglob("*.part"))  # nothing half-written
+
+
+def test_a_policy_stopped_before_its_end_is_neither_scored_nor_taken_as_trained(tiny, tmp_path):
+    folder = bm.policy_dir(tmp_path, "design", "ppo", 0)
+    folder.mkdir(parents=True)
+    (folder / "model.zip").write_bytes(b"a stopped run writes its model too")
+    (folder / "config.yaml").write_text("algo: ppo\ntrained: {num_timesteps: 1, stopped: time limit}\n")
+    assert bm.trained_record(folder) is None
+    with pytest.raises(SpreadgymError, match="no policy trained to its end"):
+        bm.score_run(tmp_path, tiny, "ppo", 0)
+    (folder / "config.yaml").write_text("algo: ppo\ntrained: {num_timesteps: 4096, stopped: done}\n")
+    assert bm.trained_record(folder) == {"num_timesteps": 4096, "stopped": "done"}
 
 
 def test_an_incomplete_rung_has_no_table(tiny, tmp_path):
