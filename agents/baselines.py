@@ -300,7 +300,7 @@ def run_baseline(env, ctx: EvalContext, method: str, budget: int = DEFAULT_BUDGE
         action = best.x
         cv, cv_se = best.cv_belief()
         extra = {"search_best_reward": best.mean_reward, "search_best_cv_percent": cv,
-                 "search_best_cv_se_percent": cv_se, "search_rescores": len(best.rewards)}
+                 "search_best_cv_se_percent": cv_se, "search_rescores": len(best.cvs)}  # 0: none re-scored
     rows = []
     for episode in range(first_episode, first_episode + episodes):
         row = score_action(env, ctx, action, method, episode=episode, search_simulations=used,

@@ -394,3 +394,10 @@ def test_a_picked_job_keeps_its_index_so_its_seeds_do_not_depend_on_the_others()
     assert picked and all(ctx.index == whole[ctx.label] for ctx in picked)
     assert picked[-1].score_seed(0) == last.score_seed(0)
     env.close()
+
+
+def test_a_search_too_small_to_re_score_reports_no_re_score():
+    env = ev.make_env(ev.DESIGN_ENV, {"granules": 64})
+    ctx = ev.evaluation_set(["compound-10-16-10"], [5.0])[0]
+    row, = bl.run_baseline(env, ctx, "random", budget=2, seed=0)
+    assert row.extra["search_rescores"] == 0 and row.search_simulations == 2
