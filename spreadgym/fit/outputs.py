@@ -66,7 +66,7 @@ def predict(fit: FitResult) -> Prediction:
     cvs = np.array([estimate.cv_curve(r.replicate_masses_kg, p.tray_width_m, p.driving, widths)[0] for r in results])
     at_target = [r.metrics.cv_percent_at_target for r in results]
     known = [c for c in at_target if c is not None]
-    swaths = [pattern.swath_from_curve(widths, c, p.cv_threshold_percent, p.tray_width_m) for c in cvs]
+    swaths = [pattern.swath_from_curve(widths, c, p.cv_threshold_percent) for c in cvs]
     measured = measured_pattern(fit.model.test, fit.scene, center, masses[0], widths)
     return Prediction(center, masses[0], masses.min(axis=0), masses.max(axis=0), widths, cvs[0], cvs.min(axis=0),
                       cvs.max(axis=0), head.cv_percent_at_target,

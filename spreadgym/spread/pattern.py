@@ -45,7 +45,6 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from spreadgym.config.scene import MIN_BOUT_TRAYS
 from spreadgym.errors import ConfigError
 from spreadgym.physics.compiled.options import KERNEL
 from spreadgym.spread import binning
@@ -324,21 +323,18 @@ def cv_curve(
 
 def effective_swath_m(trays: Trays, driving: str, threshold_percent: float,
                       widths_m: Optional[Sequence[float]] = None) -> float:
-    """The largest bout width of at least MIN_BOUT_TRAYS trays whose CV is at or below
-    threshold_percent (0.0 if none). Non-monotone curves: the largest satisfying width
-    wins, even if some narrower widths fail."""
-    return swath_from_curve(*cv_curve(trays, driving, widths_m), threshold_percent, trays.width_m)
+    """The largest bout width whose CV is at or below threshold_percent (0.0 if
+    none). Non-monotone curves: the largest satisfying width wins, even if some
+    narrower widths fail. One tray's CV is 0 whatever the pattern, so a run where
+    anything lands has a swath of at least one tray (`report.swath_text` calls a
+    swath under two trays none)."""
+    return swath_from_curve(*cv_curve(trays, driving, widths_m), threshold_percent)
 
 
-def swath_from_curve(widths_m: np.ndarray, cvs_percent: np.ndarray, threshold_percent: float,
-                     tray_width_m: float) -> float:
-    """The largest width of a computed CV curve, at least MIN_BOUT_TRAYS trays of
-    `tray_width_m` (one tray has no spread to measure: its CV is 0 whatever the pattern),
-    whose CV meets the threshold (0.0 if none)."""
+def swath_from_curve(widths_m: np.ndarray, cvs_percent: np.ndarray, threshold_percent: float) -> float:
+    """The largest width of a computed CV curve whose CV meets the threshold (0.0 if none)."""
     thr = float(threshold_percent)
     if not (np.isfinite(thr) and thr > 0):
         raise ConfigError("pattern.cv_threshold_percent", f"must be > 0, got {threshold_percent!r}")
-    widths_m, cvs_percent = np.asarray(widths_m, dtype=float), np.asarray(cvs_percent, dtype=float)
-    ok = (np.isfinite(cvs_percent) & (cvs_percent <= thr * (1.0 + 1e-12))
-          & (widths_m >= MIN_BOUT_TRAYS * tray_width_m * (1.0 - 1e-9)))
+    ok = np.isfinite(cvs_percent) & (cvs_percent <= thr * (1.0 + 1e-12))
     return float(widths_m[ok].max()) if ok.any() else 0.0

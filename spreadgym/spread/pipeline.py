@@ -226,7 +226,7 @@ def result_of(plan: ScenePlan, throws: list[discs.Throw], machine: discs.Throw, 
         cv_standard_error_percent=at_target.standard_error_percent,
         cv_raw_percent=at_target.raw_percent,
         cv_ci_percent=list(at_target.interval_percent) if ci and at_target.interval_percent is not None else None,
-        effective_swath_m=(pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent, p.tray_width_m)
+        effective_swath_m=(pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent)
                            if has_mass else 0.0),
         curve_bout_width_m=widths,
         curve_cv_percent=cvs,

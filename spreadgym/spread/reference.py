@@ -133,9 +133,9 @@ def reference_from(scene: Scene, pooled: PooledLandings) -> Reference:
     trays, masses = pooled.replicate_masses(p.tray_width_m, p.target_swath_m)
     widths = pattern.default_widths_m(trays) if trays.total_kg > 0.0 else np.zeros(0)  # nothing landed: no curve
     cvs, ses = estimate.cv_curve(masses, p.tray_width_m, p.driving, widths)
-    swath = pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent, p.tray_width_m)
+    swath = pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent)
     band = SE_MULTIPLE_FOR_SWATH * np.nan_to_num(ses)
-    interval = (pattern.swath_from_curve(widths, cvs + band, p.cv_threshold_percent, p.tray_width_m),
-                pattern.swath_from_curve(widths, cvs - band, p.cv_threshold_percent, p.tray_width_m))
+    interval = (pattern.swath_from_curve(widths, cvs + band, p.cv_threshold_percent),
+                pattern.swath_from_curve(widths, cvs - band, p.cv_threshold_percent))
     at_target = estimate.estimate_cv(masses, p.tray_width_m, p.target_swath_m, p.driving)
     return Reference(scene, pooled, trays, at_target, widths, cvs, ses, swath, interval)
