@@ -133,11 +133,14 @@ class OutFolder:
     def writing(self) -> Iterator[Path]:
         """The folder, created (with its stamp, where it has none) now; what this run
         created there is removed if the block fails (unless the command keeps finished parts
-        and wrote some: a stamp alone is removed)."""
+        and wrote some: a stamp alone is removed). An earlier run's files that this one
+        writes over are set aside first and put back if the block fails, so a failed or
+        interrupted run leaves the earlier outputs whole, never a mix of old and new."""
         path = Path(self.path)
         missing = [p for p in (path, *path.absolute().parents) if not p.exists()]
-        before = set() if missing else set(os.listdir(path))
         path.mkdir(parents=True, exist_ok=True)
+        aside = None if self.keeps_partial or missing else _set_aside(path, self.files)
+        before = set() if missing else set(os.listdir(path))
         try:
             if stamp_of(path) is None:
                 write_atomic(path / STAMP, self.command + "\n")
@@ -146,7 +149,11 @@ class OutFolder:
             stamp_only = set(os.listdir(path)) - before <= {STAMP}  # nothing finished to keep
             if not self.keeps_partial or stamp_only:
                 _remove_new(path, missing[-1] if missing else None, before)
+            if aside is not None:
+                _put_back(aside, path)
             raise
+        if aside is not None:
+            shutil.rmtree(aside, ignore_errors=True)
 
 
 def folder_problem(path: Path) -> Optional[str]:
@@ -165,6 +172,32 @@ def folder_problem(path: Path) -> Optional[str]:
     except OSError as exc:
         return f"cannot write in {existing} ({exc.strerror or type(exc).__name__})"
     return None
+
+
+ASIDE = ".spreadgym-replaced"  # an earlier run's outputs while a run writes over them
+
+
+def _set_aside(path: Path, files: Sequence[str]) -> Path:
+    """Move the files of `files` that `path` holds into its ASIDE folder (emptied first: one
+    left by a killed run held outputs that run had already given up); returns that folder."""
+    aside = path / ASIDE
+    shutil.rmtree(aside, ignore_errors=True)
+    aside.mkdir()
+    for name in files:
+        source = path / name
+        if source.is_file() or source.is_symlink():
+            (aside / name).parent.mkdir(parents=True, exist_ok=True)
+            os.replace(source, aside / name)
+    return aside
+
+
+def _put_back(aside: Path, path: Path) -> None:
+    """The files `_set_aside` moved, back where they were (over whatever the failed run wrote)."""
+    for moved in sorted(p for p in aside.rglob("*") if not p.is_dir()):
+        target = path / moved.relative_to(aside)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(moved, target)
+    shutil.rmtree(aside, ignore_errors=True)
 
 
 def _remove_new(path: Path, made: Optional[Path], before: set) -> None:

@@ -104,3 +104,22 @@ def test_a_scene_file_is_never_replaced_by_simulate_plots(tmp_path, capsys):
     code = main(["simulate", "--scene", str(scene), "--plot", str(tmp_path), "--force", "--max-runs", "2"])
     err = capsys.readouterr().err
     assert code == 2 and "would replace the input" in err
+
+
+def test_a_failed_run_over_an_earlier_one_leaves_the_earlier_outputs_whole(tmp_path):
+    folder = tmp_path / "fit"
+    with OutFolder(folder, "fit", files=("fit.json", "parameters.csv", "plots/fit.png")).writing() as out:
+        (out / "fit.json").write_text("old")
+        (out / "parameters.csv").write_text("old")
+        (out / "plots").mkdir()
+        (out / "plots" / "fit.png").write_text("old")
+    with pytest.raises(KeyboardInterrupt), OutFolder(folder, "fit", files=("fit.json", "parameters.csv",
+                                                                           "plots/fit.png")).writing() as out:
+        (out / "parameters.csv").write_text("new")  # written over before the interruption
+        (out / "plots" / "fit.png").write_text("new")
+        raise KeyboardInterrupt
+    assert [(folder / n).read_text() for n in ("fit.json", "parameters.csv", "plots/fit.png")] == ["old"] * 3
+    with OutFolder(folder, "fit", files=("fit.json", "parameters.csv", "plots/fit.png")).writing() as out:
+        (out / "fit.json").write_text("new")  # a run that writes fewer files: the folder holds its outputs only
+    assert (folder / "fit.json").read_text() == "new" and not (folder / "parameters.csv").exists()
+    assert not (folder / ".spreadgym-replaced").exists()
