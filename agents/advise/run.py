@@ -157,14 +157,22 @@ def advise(scene: Scene, test: TrayTest, width_m: float, fit: Sequence[str] = DE
         advised, after, after_se = dict(tested), before, before_se  # never worse than the test, on the fit
     p90 = scorer.score_many([scorer.space.named_unit(values_of(scorer.space, s)) for s in (tested, advised)],
                             scorer.round_draws(max(found["rounds"], 1)))
-    inside = np.array_equal(scorer.space.scene_unit(scorer.scene),
-                            scorer.space.named_unit(values_of(scorer.space, tested)))
+    inside = scored_as_tested(scorer.space, scorer.scene, tested)
     return Advice(fitted, width_m, tested, advised, before, after, before_se, after_se,
                   p90[0][1] if inside and p90[0][0] is not None else None, p90[1][1],
                   {"budget": int(budget), "granules": int(granules), "evaluations": found["evaluations"],
                    "rescore_rounds": found["rounds"], "ties": found["ties"], "simulations": scorer.simulations,
                    "model": scorer.model(scorer.space.overrides(found["x"]))},
                   time.perf_counter() - started)
+
+
+def scored_as_tested(space, scene: Scene, tested: dict) -> bool:
+    """Whether the search's point for `scene` is the test itself, so that its p90 is the
+    test's: every tested setting inside the box (a unit vector clips one outside onto the
+    edge, and the edge was scored instead) and `scene` holding them (a fitted setting moves it)."""
+    values = np.asarray(values_of(space, tested))
+    return bool(np.all((values >= space.named_low) & (values <= space.named_high))
+                and np.array_equal(np.asarray(space.scene_values(scene), dtype=float), values))
 
 
 def values_of(space, settings: dict) -> list[float]:

@@ -74,6 +74,10 @@ def parse_fit_specs(texts: Iterable[str], scene: Scene, fixed: Iterable[str] = (
                 raise ConfigError(key, f"range {brief(span)} is not two numbers LO:HI") from None
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise ConfigError(key, f"range {lo:g}:{hi:g} must be finite with LO < HI")
+            section = key.split(".")[0]
+            if getattr(scene, section, "") is None:  # scene_with would add the section: another machine
+                raise ConfigError(key, f"this scene has no {section} section; --fit searches what the scene has "
+                                       f"(give a scene with {section})")
             current = _value(scene, key)
             if isinstance(current, int) and not isinstance(current, bool):
                 raise ConfigError(key, f"is a whole number ({key} = {current}); --fit searches real-valued keys "

@@ -151,3 +151,19 @@ def test_advise_materials_advises_a_users_copy_as_the_original(trays, capsys, co
     drop = ("wall_s", "fit", "files")
     assert {k: v for k, v in runs[1].items() if k not in drop} == {k: v for k, v in runs[0].items() if k not in drop}
     assert runs[2]["fertilizer"] == name and runs[2]["cv_after_percent"] <= runs[2]["cv_before_percent"]
+
+
+def test_the_tests_p90_is_reported_only_where_the_test_itself_was_scored():
+    """A tested setting outside the settings box is clipped onto its edge when scored: that
+    score is not the test's (twin-field's feed angle box is 110-150 deg)."""
+    from spreadgym.agents.advise.run import scored_as_tested, tested_settings
+    from spreadgym.config.scene import load_scene
+    from spreadgym.config.settings import SettingsSpace
+
+    scene = load_scene("twin-field")
+    space = SettingsSpace(scene)
+    assert scored_as_tested(space, scene, tested_settings(space, scene))
+    outside = load_scene("twin-field", {"feed.angle_deg": 100.0})
+    assert not scored_as_tested(space, outside, tested_settings(space, outside))
+    moved = load_scene("twin-field", {"spinner.rpm": scene.spinner.rpm + 50.0})  # a fitted setting moved the scene
+    assert not scored_as_tested(space, moved, tested_settings(space, scene))

@@ -126,3 +126,14 @@ def test_out_never_replaces_an_input_nor_an_earlier_fit(tmp_path, capsys):
                  "--granules", "64"])
     capsys.readouterr()
     assert code == 2 and not (tmp_path / "new").exists()  # the fit failed: no folder left behind
+
+
+
+def test_a_fit_at_few_granules_says_its_intervals_understate_the_noise(tmp_path, capsys):
+    from spreadgym.cli.fit import HONEST_FIT_GRANULES
+
+    trays = _trays(tmp_path)
+    for granules, said in ((256, True), (HONEST_FIT_GRANULES, False)):
+        assert main(["fit", "--trays", trays, "--set", "granule.rotation=locked", "--fit", f"{KEY}=0.3:0.7",
+                     "--granules", str(granules), "--json"]) == 0
+        assert ("the intervals understate the simulation's own noise" in capsys.readouterr().err) == said

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from spreadgym.config.scene import load_scene
-from spreadgym.errors import SpreadgymError
+from spreadgym.errors import ConfigError, SpreadgymError
 from spreadgym.fit.likelihood import PatternModel
 from spreadgym.fit.space import parse_fit_specs
 from spreadgym.fit.trays import MAX_FILE_BYTES, TrayTest, parse_trays, read_trays, write_trays
@@ -148,3 +148,10 @@ def test_a_byte_order_mark_is_read_as_the_file_reader_reads_it(tmp_path):
     from_file = read_trays(path, 0.5)
     from_text = parse_trays("\ufeff" + text, 0.5)
     assert np.array_equal(from_text.x_m, from_file.x_m) and np.array_equal(from_text.mass_kg, from_file.mass_kg)
+
+
+def test_a_fit_key_of_a_section_the_scene_lacks_is_refused():
+    """Fitting twin.spacing_m on a one-disc scene would have made it a twin-disc machine."""
+    with pytest.raises(ConfigError, match="twin.spacing_m: this scene has no twin section"):
+        parse_fit_specs(["twin.spacing_m=0.5:1"], load_scene("paper"))
+    assert parse_fit_specs(["twin.spacing_m=0.7:1"], load_scene("twin-field")).keys == ("twin.spacing_m",)
