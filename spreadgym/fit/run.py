@@ -100,13 +100,13 @@ def fit_tray_test(scene: Scene, space: FitSpace, test: TrayTest, model: str = "a
                              f"needs at least {space.dims + 3}")
     objective, best = optimise.fit(pattern_model, seed)
     level = uncertainty.threshold(pattern_model.trays, space.dims)
-    for _ in range(RECENTRES + 1):
+    for attempt in range(RECENTRES + 1):
         jac = uncertainty.jacobian(objective, best)
         info = jac.T @ jac
         intervals = [uncertainty.profile_interval(objective, best, j, level, info) for j in range(space.dims)]
         lowest = min((i.lowest for i in intervals), key=lambda m: m.cost)
-        if lowest.cost >= best.cost - RECENTRE_RISE:
-            break
+        if lowest.cost >= best.cost - RECENTRE_RISE or attempt == RECENTRES:
+            break  # the last pass keeps its centre: the estimate and its intervals stay one fit
         best = optimise.minimise(objective, [lowest.unit])  # a profile found a lower point: start again there
     check_covered(pattern_model.predict([best.unit])[0], test, "at the estimate")
     sim_sd = uncertainty.simulation_sd(objective, best, jac)
