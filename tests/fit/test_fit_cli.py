@@ -137,3 +137,30 @@ def test_a_fit_at_few_granules_says_its_intervals_understate_the_noise(tmp_path,
         assert main(["fit", "--trays", trays, "--set", "granule.rotation=locked", "--fit", f"{KEY}=0.3:0.7",
                      "--granules", str(granules), "--json"]) == 0
         assert ("the intervals understate the simulation's own noise" in capsys.readouterr().err) == said
+
+
+def test_the_estimate_is_the_centre_of_its_intervals_when_a_profile_keeps_meeting_lower_points(monkeypatch):
+    """A profile that meets a lower point moves the fit there and the profiles are redone;
+    on the last allowed pass the fit stays, so the estimate is the point its intervals were
+    walked from (it moved after them before)."""
+    import dataclasses
+
+    from spreadgym.fit import uncertainty
+    from spreadgym.fit.optimise import Minimum
+    from spreadgym.fit.run import RECENTRES, fit_tray_test
+    from spreadgym.fit.space import parse_fit_specs
+
+    scene = load_scene("paper", {"granule.rotation": "locked"})
+    test = synthetic_tray_test(scene, {KEY: 0.5}, model="compiled", granules=2048, noise_seed=3)
+    real, centres = uncertainty.profile_interval, []
+
+    def always_lower(objective, best, j, level, info):  # every profile "meets" a point far below, at its end
+        centres.append(best.unit.copy())
+        found = real(objective, best, j, level, info)
+        return dataclasses.replace(found, lowest=Minimum(found.low_point.copy(), -1e9))
+
+    monkeypatch.setattr(uncertainty, "profile_interval", always_lower)
+    fit = fit_tray_test(scene, parse_fit_specs([f"{KEY}=0.3:0.7"], scene), test, model="compiled", granules=256,
+                        discrepancy=None)
+    assert len(centres) == RECENTRES + 1  # one key: a profile per pass
+    assert np.allclose(fit.space.unit(fit.estimate), centres[-1], rtol=0, atol=1e-12)  # unit -> value -> unit
