@@ -39,6 +39,8 @@ from typing import Optional
 import numpy as np
 from numba import njit
 
+from spreadgym.agents.device_check import Table, count_list, paper_designs, staged_batch
+
 PROBES = ("arithmetic", "memory", "spinner", "finish")
 ARITHMETIC_STEPS = 2_000_000  # one arithmetic unit: ~10 ms on a 3 GHz core
 PAUSE_S = 1.5  # between phases: a unit begun near a phase's end finishes before the next phase
@@ -89,7 +91,6 @@ def worker(core: int, start_at: float, phase_s: float, stream_mb: int, designs: 
     began = time.time()
     os.sched_setaffinity(0, {core})
     from spreadgym import threads
-    from spreadgym.agents.device_check import paper_designs, staged_batch
     from spreadgym.config.materials import load_library
 
     threads.set_threads(1)
@@ -160,8 +161,6 @@ def measure(out: Path, procs: list[int], phase_s: float = 5.0, stream_mb: int = 
             start_s: float = 12.0, say=print) -> list[dict]:
     """The rounds at each count in `procs` (at most the cores this process may use), one
     after another; contention.csv under `out`; returns its rows."""
-    from spreadgym.agents.device_check import Table
-
     cores = sorted(os.sched_getaffinity(0))
     arithmetic(1000)  # compiled and cached here once, so the workers only load it
     table, rounds = Table(out / "contention.csv"), {}
@@ -187,7 +186,7 @@ def measure(out: Path, procs: list[int], phase_s: float = 5.0, stream_mb: int = 
 def main(argv: Optional[list[str]] = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="out/contention", help="folder for contention.csv")
-    parser.add_argument("--procs", default="1,2,4,8,16", help="process counts, comma-separated")
+    parser.add_argument("--procs", type=count_list, default=[1, 2, 4, 8, 16], help="process counts, comma-separated")
     parser.add_argument("--phase-s", type=float, default=5.0,
                         help="seconds each of the arithmetic and memory probes runs (the batches twice that)")
     parser.add_argument("--stream-mb", type=int, default=512, help="the memory probe's array, MB per process")
@@ -200,15 +199,9 @@ def main(argv: Optional[list[str]] = None) -> None:
     if args.role == "worker":
         worker(args.core, args.start_at, args.phase_s, args.stream_mb, args.designs, Path(args.file))
         return
-    try:
-        procs = [int(p) for p in args.procs.split(",")]
-    except ValueError:
-        parser.error(f"--procs: whole numbers separated by commas, e.g. 1,2,16; got {args.procs!r}")
-    if min(procs) < 1:
-        parser.error(f"--procs: counts must be >= 1; got {args.procs!r}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    measure(out, procs, args.phase_s, args.stream_mb, args.designs)
+    measure(out, args.procs, args.phase_s, args.stream_mb, args.designs)
 
 
 if __name__ == "__main__":

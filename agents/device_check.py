@@ -362,14 +362,14 @@ def thread_counts(quick: bool, asked: Optional[list[int]] = None) -> list[int]:
     return counts[:2] if quick else counts
 
 
-def thread_list(text: str) -> list[int]:
-    """`--threads`: whole numbers >= 1, comma-separated."""
+def count_list(text: str) -> list[int]:
+    """`--threads`, contention's `--procs`: whole numbers >= 1, comma-separated."""
     try:
         counts = [int(part) for part in text.split(",")]
     except ValueError:
         counts = []
     if not counts or min(counts) < 1:
-        raise argparse.ArgumentTypeError(f"expected thread counts >= 1 separated by commas, e.g. 1,16; got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected counts >= 1 separated by commas, e.g. 1,16; got {text!r}")
     return counts
 
 
@@ -967,7 +967,7 @@ def main(argv: Optional[list[str]] = None) -> None:
                              "independent one-thread processes keep less than one core's rate each")
     parser.add_argument("--batch", type=int, default=None, help="designs per CPU block (default 256; quick 24)")
     parser.add_argument("--repeats", type=int, default=3, help="timed blocks after the warm-up")
-    parser.add_argument("--threads", type=thread_list, default=None,
+    parser.add_argument("--threads", type=count_list, default=None,
                         help="the CPU series' thread counts, e.g. 1,16 (default 1,2,4,8,16)")
     parser.add_argument("--deadline-s", type=float, default=420.0, help="the whole run's time, both processes")
     parser.add_argument("--compile-wait-s", type=float, default=120.0,

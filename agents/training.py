@@ -309,9 +309,9 @@ def _resume(cls, cfg, checkpoints, venv, out_dir, log):
         for err in errors:
             log(f"skipped checkpoint {err}")
         log(f"resuming from {ck.model} ({model.num_timesteps} steps)")
-        # a seed of its own for the part after the checkpoint: seeded with the run's seed again,
-        # the envs would replay the contexts and samples of step 0 (and torch's draws would not
-        # be seeded at all); from the same checkpoint a resumed run gives the same bits
+        # a seed of its own for the part after the checkpoint: SB3's load seeds torch and the envs
+        # with the run's seed again, which replays the contexts, samples and draws of step 0;
+        # from the same checkpoint a resumed run gives the same bits
         seed = resume_seed(cfg.seed, int(model.num_timesteps))
         model.set_random_seed(seed)
         env.seed(seed)

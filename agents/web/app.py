@@ -267,8 +267,7 @@ def create_app(charts_dir: Path = Path("out/charts"), addresses: Addresses = LOO
         except charts.NotFound:
             if not jobs.is_running_folder(name):
                 raise
-            # listed from its start (chart_list), before its first file is written: nothing to show yet
-            return {"name": name, "finished": False, "markdown": None, "rows": [], "files": [], "cell_pictures": []}
+            return charts.waiting_detail(name)  # listed from its start (chart_list), before its first file
 
     @app.get("/files/charts/{name:path}")
     def chart_file(name: str):

@@ -178,6 +178,11 @@ def chart_detail(root: Path, name: str) -> dict:
             "cell_pictures": pictures}
 
 
+def waiting_detail(name: str) -> dict:
+    """`chart_detail`'s answer for the running job's folder before its first file: nothing to show yet."""
+    return {"name": name, "finished": False, "markdown": None, "rows": [], "files": [], "cell_pictures": []}
+
+
 def chart_file(root: Path, name: str) -> tuple[Path, str]:
     """(path, media type) of a chart's file: a known type, inside the charts folder."""
     path = inside(root, name)
@@ -317,18 +322,24 @@ class ChartJobs:
                 left = max(0.0, status["estimate_s"] - elapsed)
         return {**status, "elapsed_s": elapsed, "left_s": left}
 
+    def _is_jobs(self, folder: Path) -> bool:
+        """Whether `folder` (resolved, `inside`) is the folder the job's status names: compared
+        as folders, so "job/", "job/." and "job" are one. The caller holds the lock."""
+        out = self.status.get("out")
+        return out is not None and inside(self.root, out) == folder
+
     def is_running_folder(self, name: str) -> bool:
-        """Whether `name` is the running job's folder (compared as folders)."""
+        """Whether `name` is the running job's folder."""
+        folder = inside(self.root, name)
         with self.lock:
-            out = self.status.get("out") if self.running() else None
-        return out is not None and inside(self.root, out) == inside(self.root, name)
+            return self.running() and self._is_jobs(folder)
 
     def remove(self, name: str) -> dict:
         """Remove an unfinished chart folder that no job is writing (`remove_folder`); the job's status is
         cleared when it is its folder."""
-        folder = inside(self.root, name)  # compared as folders: "job/", "job/." and "job" are one
+        folder = inside(self.root, name)
         with self.lock:
-            ours = self.status.get("out") is not None and inside(self.root, self.status["out"]) == folder
+            ours = self._is_jobs(folder)
             if self.running() and ours:
                 raise SpreadgymError(f"chart {brief(name)}: its job is running; cancel it first")
             remove_folder(self.root, name)

@@ -20,6 +20,12 @@ const shown = () => $("cv").textContent;
 const greyed = () => document.body.dataset.stale === "yes" && $("figures").classList.contains("stale");
 const answerPattern = () => answer("/api/pattern", 200, payload(next("/api/pattern").body.set["spinner.rpm"]));
 
+async function draftInFlight(rpm) {  // the slider dragged to `rpm`: its draft request, not yet answered
+  $("s0").value = String(rpm); $("s0").fire("input");
+  await tick();
+  return next("/api/pattern");
+}
+
 (async () => {
   load(path.join(S, "common.js"), path.join(S, "pattern.js"));
   await tick();
@@ -32,9 +38,7 @@ const answerPattern = () => answer("/api/pattern", 200, payload(next("/api/patte
   check("the first picture is shown", shown().startsWith("CV-for-800rpm") && !greyed());
 
   // a bad value typed while a draft for 900 computes
-  $("s0").value = "900"; $("s0").fire("input");
-  await tick();
-  const draft = next("/api/pattern");
+  const draft = await draftInFlight(900);
   $("c0").value = "5"; $("c0").fire("input");
   check("the draft in flight is aborted when the field is typed in", draft.aborted === true);
   await tick(1200);
@@ -47,9 +51,7 @@ const answerPattern = () => answer("/api/pattern", 200, payload(next("/api/patte
   answerPattern();
   await tick();
   check("a settled value is shown", shown().startsWith("CV-for-1000rpm") && !greyed());
-  $("s0").value = "900"; $("s0").fire("input");
-  await tick();
-  const second = next("/api/pattern");
+  const second = await draftInFlight(900);
   $("c0").value = "1050"; $("c0").fire("input");
   check("typing a good value aborts the draft for the old one", second.aborted === true && greyed());
   while (!next("/api/pattern")) await tick(10);
@@ -59,9 +61,7 @@ const answerPattern = () => answer("/api/pattern", 200, payload(next("/api/patte
   check("the typed value's answer is shown", shown().startsWith("CV-for-1050rpm") && !greyed());
 
   // a scene upload refused while a draft computes
-  $("s0").value = "700"; $("s0").fire("input");
-  await tick();
-  const third = next("/api/pattern");
+  const third = await draftInFlight(700);
   $("upload").files = [{ size: 20, text: async () => "spinner: [" }];
   $("upload").value = "mine.yaml";
   $("upload").fire("change");
