@@ -1,6 +1,7 @@
 """The `spreadgym` console script: parse the command name, import its module, run it.
 
-Bad input (a SpreadgymError or an argparse error) exits with status 2 and no traceback.
+Bad input (a SpreadgymError or an argparse error) exits with status 2 and no traceback,
+after one line on stderr naming the command, the flag or key and what is allowed.
 A closed stdout (`spreadgym compare | head`) ends the command quietly with status 141
 (128 + SIGPIPE, what a shell reports for a tool killed by the broken pipe).
 """
@@ -27,9 +28,18 @@ def _requested(argv: Sequence[str]) -> Optional[str]:
     return next((word for word in argv if not word.startswith("-")), None)
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line ("spreadgym simulate: error:
+    argument --precision: ...", and where to find the flags) instead of the whole
+    usage block before it. Sub-command parsers are made of the same class."""
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser(argv: Sequence[str] = ()) -> tuple[argparse.ArgumentParser, Optional[ModuleType]]:
     """The parser, with the arguments of the requested command only (its module imported)."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="spreadgym",
         description="Simulate centrifugal fertilizer spreaders, score spread patterns, design spinners.",
     )
@@ -49,7 +59,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser, module = build_parser(argv)
     try:
         args = parser.parse_args(argv)
-    except SystemExit as ended:  # a usage error (already printed, one line) or --help
+    except SystemExit as ended:  # a usage error (already printed, one line: OneLineParser) or --help
         return int(ended.code or 0)
     try:
         code = int(module.run(args) or 0)

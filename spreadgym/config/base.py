@@ -107,8 +107,7 @@ def format_validation_error(exc: ValidationError, model: type[BaseModel], root: 
     if first["type"] != "value_error":
         message += f" (got {brief(first.get('input'))})"
         allowed = field_range(model, loc)
-        if allowed and first["type"] in {"greater_than", "greater_than_equal", "less_than", "less_than_equal",
-                                          "finite_number"}:
+        if allowed:  # out of range, not finite, or not a number at all ('nan' is a string in YAML)
             message += f"; allowed: {allowed}"
     return ConfigError(key, message)
 

@@ -126,6 +126,21 @@ def test_non_numeric_flag_is_an_argparse_error(capsys):
     assert "--mass" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, text", [
+    (["simulate", "--precision", "-1"], "spreadgym simulate: error: argument --precision: -1.0 must be"),
+    (["calibrate", "--mass", "heavy"], "spreadgym calibrate: error: argument --mass:"),
+    (["simulate", "--no-such-flag"], "spreadgym: error: unrecognized arguments: --no-such-flag"),
+    ([], "spreadgym: error: the following arguments are required: COMMAND"),
+    (["simulate", "--set", "spinner.rpm=nan"], "spinner.rpm: Input should be a valid number (got 'nan'); allowed:"),
+])
+def test_a_usage_error_is_one_line_without_the_usage_block(capsys, argv, text):
+    """argparse printed its whole usage block before the error; the error is one line, and a
+    number that is not one names its allowed range ('nan' is a string in YAML)."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and text in err and "usage:" not in err, err
+
+
 def test_subprocess_exit_code_and_no_traceback():
     proc = subprocess.run(
         [sys.executable, "-m", "spreadgym.cli.main", "calibrate",
