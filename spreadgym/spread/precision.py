@@ -12,8 +12,10 @@ standard error is still above p (the pilot's s is itself an estimate), the count
 topped up by the same rule, at most `max_runs`. The estimate is the pooled one over every
 run made. Its 95 % intervals cover the exact CV 90-99 % of the time on patterns with a
 known CV (tests/spread/test_precision.py), so the rule leaves the stated standard error
-honest; a pattern for which no standard error exists (fewer than 3 replicates, nothing
-landed) stops after the pilot.
+honest. The pilot is as many runs as give the pooled CV the 3 replicates its standard
+error needs (a granule count with few divisors makes a run one replicate: 2047
+granules), at least PILOT_RUNS; a pattern for which no standard error exists even so
+(nothing landed, or one replicate holding all the mass) stops after the pilot.
 """
 
 from __future__ import annotations
@@ -65,6 +67,14 @@ def runs_needed(standard_error_pp: Optional[float], runs: int, precision_pp: flo
         return runs
     wanted = math.ceil(runs * (standard_error_pp / precision_pp) ** 2 * (1.0 - 1e-12))
     return min(max(wanted, runs + 1), max_runs)
+
+
+def pilot_runs_of(scene: Scene, max_runs: int) -> int:
+    """PILOT_RUNS, or the fewest runs whose replicates pooled reach
+    `estimate.MIN_REPLICATES_FOR_SE` (a run has as many replicates as divide its granule
+    count, at most `sim.replicates`), at most `max_runs`."""
+    per_run = replicate_sizes(scene.sim.granules, scene.sim.replicates).size
+    return min(max(PILOT_RUNS, math.ceil(estimate.MIN_REPLICATES_FOR_SE / per_run)), max(max_runs, PILOT_RUNS))
 
 
 def pool_until_precise(add_runs: Callable[[int], Optional[float]], precision_pp: float, max_runs: int,
@@ -264,7 +274,8 @@ def simulate_precisely(scene: Scene, precision_pp: float = SIMULATE_PRECISION_PP
     """Runs of `scene` pooled until the CV at the target has standard error `precision_pp`
     (percentage points), at most `max_runs` runs; `progress(runs, cap)` after each."""
     started = time.perf_counter()
-    pool, reference = _pool_runs(scene, precision_pp, max_runs, model, library, tracks, progress)
+    pool, reference = _pool_runs(scene, precision_pp, max_runs, model, library, tracks, progress,
+                                 pilot_runs_of(scene, max_runs))
     return PreciseEstimate(pool.first, pool.runs, precision_pp, max_runs, reference, pool.retained_kg,
                            pool.intercepted_kg, pool.outcomes, time.perf_counter() - started)
 
@@ -277,4 +288,4 @@ def reference_precisely(scene: Scene, precision_pp: float = REFERENCE_PRECISION_
     least MIN_RUNS; exactly `runs` where given), as `reference.reference_from` reports it."""
     cap = runs if runs is not None else max(max_runs, MIN_RUNS)
     return _pool_runs(scene, precision_pp, cap, model, library, 0, progress,
-                      pilot_runs=runs if runs is not None else PILOT_RUNS)[1]
+                      pilot_runs=runs if runs is not None else pilot_runs_of(scene, cap))[1]

@@ -126,3 +126,16 @@ def test_simulate_precisely_reaches_the_precision_asked_and_is_deterministic():
     assert a.precision_met and a.at_target.standard_error_percent <= 0.4
     assert a.to_json()["cv_percent_at_target"] == b.to_json()["cv_percent_at_target"]
     assert np.array_equal(a.masses, b.masses)
+
+
+def test_a_run_of_one_replicate_gets_a_pilot_that_has_a_standard_error():
+    """2047 granules (23 x 89) make a run of one replicate; a pilot of two runs had two
+    replicates, so no standard error, and the rule stopped there with none. The pilot now
+    pools the three replicates a standard error needs (and stays two runs where a run has
+    several, and within the cap)."""
+    odd = scene_with(load_scene("paper"), {"sim.granules": 2047, "sim.seed": 3})
+    assert precision.pilot_runs_of(odd, 64) == 3
+    assert precision.pilot_runs_of(load_scene("paper"), 64) == precision.PILOT_RUNS
+    assert precision.pilot_runs_of(odd, 1) == precision.PILOT_RUNS  # below the pilot: refused as before
+    result = precision.simulate_precisely(odd, precision_pp=5.0)
+    assert result.runs == 3 and result.at_target.standard_error_percent is not None
