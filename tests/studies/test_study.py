@@ -122,3 +122,19 @@ def test_cli_rejects_zero_granules(tmp_path, capsys):
     assert main(["study", "paper", "--granules", "0", "--out", str(tmp_path)]) == 2
     assert "--granules" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+
+
+def test_the_committed_study_is_what_the_code_gives():
+    """docs/paper-study.md says `spreadgym study paper` reproduces docs/study/paper-study.csv
+    (seed 0); the base case, free and locked, rerun here as written there. (The CSV went
+    stale for a week of physics changes before this test.)"""
+    from pathlib import Path
+
+    committed = Path(__file__).resolve().parents[2] / "docs" / "study" / study.CSV_NAME
+    with open(committed, newline="", encoding="utf-8") as handle:
+        stored = [r for r in csv.DictReader(handle) if r["sweep"] == "material" and r["material"] == "mc"]
+    base = study.Case("material", "mc", study.BASE_RPM, study.BASE_DIAMETER_M)
+    fresh = study.paper_study(cases=[base])
+    assert len(stored) == len(fresh) == 2
+    for want, got in zip(stored, fresh):
+        assert {k: str(study._csv_value(v)) for k, v in got.items()} == want
