@@ -45,7 +45,8 @@ MAX_CONE_DEG = 15.0  # a tilted flat-disc launch misses the longer time on a con
 class Spinner(StrictModel):
     radius_m: Real = Field(gt=0, le=2.0, description="disc radius")
     rpm: Real = Field(ge=MIN_RPM, le=MAX_RPM, description="disc speed, revolutions per minute")
-    height_m: Real = Field(ge=0, le=5.0, description="disc height above ground")
+    height_m: Real = Field(ge=0, le=5.0,
+                           description="disc height above ground, where granules leave it (a dished disc's rim)")
     direction: Literal["ccw", "cw"] = Field(description="sense of rotation seen from above")
     material: str
     cone_deg: Real = Field(default=0.0, ge=0.0, le=MAX_CONE_DEG,
