@@ -76,13 +76,14 @@ def single_pass_features(trays: pattern.Trays, half_width_m: float, bins: int) -
 
 
 def bout_features(trays: pattern.Trays, bout_width_m: float, driving: str, bins: int) -> np.ndarray:
-    """Overlapped pattern over one bout on `bins` bins, / mean / 2, clipped to [0, 1]."""
+    """Overlapped pattern over one bout on `bins` bins, / mean / 2, clipped to [0, 1]
+    (over one period of the field where `pattern.bout_pattern` gives the period)."""
     if trays.total_kg <= 0:
         return np.zeros(bins)
     bout = pattern.bout_pattern(trays, bout_width_m, driving)
-    n, w = bout.size, trays.width_m
+    n, w = pattern.bout_tray_count(bout_width_m, trays.width_m), trays.width_m
     start = (-(n // 2) - 0.5) * w
-    edges = start + w * np.arange(n + 1)
+    edges = start + w * np.arange(bout.size + 1)
     masses = rebin(edges, bout, np.linspace(edges[0], edges[-1], bins + 1))
     mean = masses.mean()
     return np.clip(masses / mean / 2.0, 0.0, 1.0) if mean > 0 else np.zeros(bins)

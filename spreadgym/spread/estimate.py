@@ -4,7 +4,7 @@ A run's granules come in K independent replicates (independent scrambles of a
 randomised quasi-Monte Carlo point set, or plain Monte Carlo draws): each replicate's
 tray masses m_k (T,) are an independent, identically distributed estimate, and the
 run's pattern is their sum m = sum_k m_k. The overlapped bout at width W is b = F m
-(F the (n, T) fold matrix of `pattern.bout_pattern`).
+(F the fold matrix of `pattern.bout_pattern`).
 
 The plain CV of b is biased upwards by the sampling noise (its between-tray variance
 and squared mean both carry it); that bias is c/K + O(1/K^2) in the replicates K,
@@ -148,18 +148,18 @@ SPLIT_WORK = 4e6
 
 def _bout_cvs_of(masses: np.ndarray, counts: np.ndarray, driving: str) -> tuple:
     tray, column = pattern.fold_pairs_cached(masses.shape[1], tuple(int(n) for n in counts), driving)
-    return bout_cvs(masses, tray, column, counts)
+    return bout_cvs(masses, tray, column, counts, pattern.bout_columns(counts, driving == "racetrack"))
 
 
 @KERNEL
-def bout_cvs(masses, tray, column, counts):
+def bout_cvs(masses, tray, column, counts, columns):
     """Plain and corrected CV of the overlapped bouts of several widths, from the (K, T)
     tray masses of K replicates: (raw (W,), corrected (W,), jackknife s.e. (W,), usable
     (W,) bool), W = counts.size.
 
-    Bout j has counts[j] trays, the bouts side by side (bout j starts at column
-    sum(counts[:j])); tray `tray[p]` adds its mass to column `column[p]`
-    (`pattern.fold_pairs`). raw: `pattern.row_cv` of the pooled bout; with K >= 2, the
+    Bout j has counts[j] trays, held in columns[j] columns (`pattern.bout_columns`), the
+    bouts side by side (bout j starts at column sum(columns[:j])); tray `tray[p]` adds
+    its mass to column `column[p]` (`pattern.fold_pairs`). raw: `pattern.row_cv` of the pooled bout; with K >= 2, the
     leave-one-out CVs c_i (every replicate but i, summed, not subtracted, so a replicate
     holding all the mass leaves exact zeros) give corrected = max(0, K raw - (K - 1)
     mean c) and s.e. = sqrt((K - 1) / K sum (c_i - mean c)^2). usable: raw and every c_i
@@ -172,8 +172,8 @@ def bout_cvs(masses, tray, column, counts):
     total = 0
     widest = 0
     for j in range(counts.size):
-        total += counts[j]
-        widest = max(widest, counts[j])
+        total += columns[j]
+        widest = max(widest, columns[j])
     bouts = np.zeros((k, total))
     for p in range(tray.size):
         for r in range(k):
@@ -187,21 +187,21 @@ def bout_cvs(masses, tray, column, counts):
     loo = np.empty(k)
     start = 0
     for j in range(counts.size):
-        n = counts[j]
-        for q in range(n):
+        n, c = counts[j], columns[j]
+        for q in range(c):
             row[q] = 0.0
             for r in range(k):
                 row[q] += bouts[r, start + q]
-        raw[j] = pattern.row_cv(row[:n])
+        raw[j] = pattern.row_cv(row[:c], n)
         finite = k >= 2 and math.isfinite(raw[j])
-        before[:n] = 0.0
+        before[:c] = 0.0
         for i in range(k if finite else 0):
-            for q in range(n):
+            for q in range(c):
                 row[q] = before[q]
                 for r in range(i + 1, k):
                     row[q] += bouts[r, start + q]
                 before[q] += bouts[i, start + q]
-            loo[i] = pattern.row_cv(row[:n])
+            loo[i] = pattern.row_cv(row[:c], n)
             finite = finite and math.isfinite(loo[i])
         if finite:
             mean = 0.0
@@ -214,5 +214,5 @@ def bout_cvs(masses, tray, column, counts):
             cv[j] = max(0.0, k * raw[j] - (k - 1) * mean)
             se[j] = math.sqrt((k - 1) / k * spread)
             usable[j] = True
-        start += n
+        start += c
     return raw, cv, se, usable

@@ -23,7 +23,7 @@ from spreadgym.physics.compiled.options import PARALLEL
 from spreadgym.physics.departure import means_of
 from spreadgym.spread.binning import OK, bin_landings
 from spreadgym.spread.estimate import bout_cvs
-from spreadgym.spread.pattern import fold_pair_arrays
+from spreadgym.spread.pattern import bout_columns, fold_pair_arrays
 from spreadgym.spread.rotations import turned_copies
 from spreadgym.spread.von_mises import antithetic_turns
 
@@ -108,7 +108,7 @@ def finish_designs(skip, first, copies, run_first, run_start, run_stop, states, 
         masses[:] = per_replicate
         target = np.full(1, target_trays[d])
         tray, column = fold_pair_arrays(trays, target, racetrack[d])
-        raw, cv, se, usable = bout_cvs(masses, tray, column, target)
+        raw, cv, se, usable = bout_cvs(masses, tray, column, target, bout_columns(target, racetrack[d]))
         out_target[d, 0], out_target[d, 1], out_target[d, 2], out_target[d, 3] = raw[0], cv[0], se[0], usable[0]
         reach = -1
         for t in range(trays):
@@ -118,7 +118,7 @@ def finish_designs(skip, first, copies, run_first, run_start, run_stop, states, 
             continue
         widths = np.arange(1, 2 * reach + 2)  # `pattern.default_widths_m` in trays
         tray, column = fold_pair_arrays(trays, widths, racetrack[d])
-        raw, cv, se, usable = bout_cvs(masses, tray, column, widths)
+        raw, cv, se, usable = bout_cvs(masses, tray, column, widths, bout_columns(widths, racetrack[d]))
         for w in range(widths.size):
             out_curve[t0 + w, 0], out_curve[t0 + w, 1], out_curve[t0 + w, 2] = raw[w], cv[w], se[w]
             out_curve[t0 + w, 3] = usable[w]

@@ -23,12 +23,17 @@ Conventions (x across the track, to the right of the machine; SI units):
   [-W/2, W/2). For racetrack any n consecutive trays give the same values. For
   back-and-forth this strip holds half of each kind of bout, so with n odd its
   values are exactly those of the whole 2W period (each counted once instead of
-  twice); with n even the tray on one bout midline is in the strip and the tray on
-  the other is not (a half-tray effect). A symmetric pattern gives the same field,
-  hence the same numbers, for both driving patterns.
+  twice). With n even a strip would hold the tray on one kind of bout's midline and
+  not the one on the other's, so its CV would change when the pattern is mirrored
+  (by up to 3 pp on the field scene); the bout is then the whole period of 2n
+  trays, in which every value of the field appears twice but the two midline trays
+  once (`bout_columns`). A symmetric pattern gives the same field, hence the same
+  numbers, for both driving patterns.
 * CV = 100 s / mean, s the sample standard deviation (ddof = 1) over the n trays of
-  one bout. With n = 1 the bout is one tray and the CV is 0 (nothing can vary at
-  the tray resolution); with no mass at all the CV is NaN.
+  one bout: for a period of 2n trays, its sum of squares over 2 (n - 1), i.e. the
+  trays weighted 1/2, n trays' worth (`row_cv`); with n odd this is the strip's CV.
+  With n = 1 the bout is one tray and the CV is 0 (nothing can vary at the tray
+  resolution); with no mass at all the CV is NaN.
 * Effective (working) width: the largest tested W whose CV is at or below the
   threshold. The CV curve need not be monotone (a triangle's curve dips back to 0
   at half and at its full base); the standards' working width is the largest W
@@ -223,10 +228,27 @@ def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.nd
     Back-and-forth: unmirrored passes (even j) put tray i at k = i + j n, i.e.
     k = i (mod 2n); mirrored passes (odd j) put it at k = j n - i, i.e.
     k = n - i (mod 2n); so q = (i + n // 2) mod 2n and q = (n - i + n // 2) mod 2n,
-    each where q < n. The pairs come bout by bout, each tray in turn (back-and-forth:
-    the unmirrored passes' trays, then the mirrored passes'): `bout_cvs` adds them in
-    this order."""
+    each where q < n, or with n even where q < 2n (the bout is the period:
+    `bout_columns`, so bout j starts at the sum of the earlier bouts' columns). The
+    pairs come bout by bout, each tray in turn (back-and-forth: the unmirrored passes'
+    trays, then the mirrored passes'): `bout_cvs` adds them in this order."""
     return fold_pair_arrays(int(tray_count), np.asarray(counts, dtype=np.int64), driving == "racetrack")
+
+
+@KERNEL
+def bout_columns(counts, racetrack):
+    """The trays that stand for a bout of counts[j] trays in the fold (int64 array):
+    counts[j], or for back-and-forth with counts[j] even the whole period of 2 counts[j]
+    trays. An even strip centred on a pass holds one kind of bout's midline tray and not
+    the other's, so its CV would depend on which way the pattern is skewed; the period
+    holds every value of the field twice but its two midlines once, and `row_cv` weighs
+    them so (with n odd the strip already holds every value once)."""
+    columns = counts.copy()
+    if not racetrack:
+        for j in range(counts.size):
+            if counts[j] % 2 == 0:
+                columns[j] = 2 * counts[j]
+    return columns
 
 
 @KERNEL
@@ -234,12 +256,13 @@ def fold_pair_arrays(tray_count, counts, racetrack):
     """`fold_pairs` in compiled code, for kernels that fold rows themselves
     (spreadgym.spread.finish_kernel); `racetrack` False: back-and-forth."""
     m = tray_count // 2
+    columns = bout_columns(counts, racetrack)
     tray = np.empty(2 * tray_count * counts.size, dtype=np.int64)
     column = np.empty(tray.size, dtype=np.int64)
     p = 0
     start = 0
     for j in range(counts.size):
-        n = counts[j]
+        n, c = counts[j], columns[j]
         if racetrack:
             for t in range(tray_count):
                 tray[p] = t
@@ -248,59 +271,64 @@ def fold_pair_arrays(tray_count, counts, racetrack):
         else:
             for t in range(tray_count):  # unmirrored passes
                 q = (t - m + n // 2) % (2 * n)
-                if q < n:
+                if q < c:
                     tray[p] = t
                     column[p] = start + q
                     p += 1
             for t in range(tray_count):  # mirrored passes
                 q = (n - (t - m) + n // 2) % (2 * n)
-                if q < n:
+                if q < c:
                     tray[p] = t
                     column[p] = start + q
                     p += 1
-        start += n
+        start += c
     return tray[:p], column[:p]
 
 
 def _fold_matrix(tray_count: int, n: int, driving: str) -> np.ndarray:
-    """(n, T) matrix M with bout = M @ tray_masses (`fold_pairs` for one bout)."""
+    """(C, T) matrix M with bout = M @ tray_masses (`fold_pairs` for one bout; C = n,
+    or 2n for a back-and-forth period: `bout_columns`)."""
     tray, column = fold_pairs(tray_count, np.array([n]), driving)
-    matrix = np.zeros((n, tray_count))
+    matrix = np.zeros((int(bout_columns(np.array([n]), driving == "racetrack")[0]), tray_count))
     np.add.at(matrix, (column, tray), 1.0)
     return matrix
 
 
 def bout_pattern(trays: Trays, bout_width_m: float, driving: str) -> np.ndarray:
     """The overlapped distribution over one bout (n = W / w values, kg per tray,
-    left to right, tray centres (q - n // 2) * w for q = 0..n-1)."""
+    left to right, tray centres (q - n // 2) * w for q = 0..n-1; for back-and-forth
+    with n even the period, q = 0..2n-1: `bout_columns`). Its mean is the field's."""
     _check_driving(driving)
     n = bout_tray_count(bout_width_m, trays.width_m)
     return _fold_matrix(trays.count, n, driving) @ trays.mass_kg
 
 
 @KERNEL
-def row_cv(values) -> float:
-    """CV in % of the 1-D `values`: 100 s / mean, s with ddof = 1 (sums in order); 0 for
-    one value; NaN where the mean is not > 0 (no mass). Compiled: the estimate's kernel
+def row_cv(values, trays) -> float:
+    """CV in % of a bout of `trays` trays given as the 1-D `values`: its `trays` values,
+    or a back-and-forth period of 2 `trays` (`bout_columns`). 100 s / mean, sums in
+    order, s with ddof = 1 over the bout: the sum of squares over (trays - 1), for a
+    period over 2 (trays - 1) (each tray of the period weighs 1/2); 0 for one tray; NaN
+    where the mean is not > 0 (no mass). Compiled: the estimate's kernel
     (`estimate.bout_cvs`) calls it for every bout."""
-    n = values.size
+    size = values.size
     total = 0.0
-    for i in range(n):
+    for i in range(size):
         total += values[i]
-    mean = total / n
+    mean = total / size
     if not mean > 0.0:
         return math.nan
-    if n == 1:
+    if trays == 1:
         return 0.0
     spread = 0.0
-    for i in range(n):
+    for i in range(size):
         spread += (values[i] - mean) * (values[i] - mean)
-    return 100.0 * math.sqrt(spread / (n - 1)) / mean
+    return 100.0 * math.sqrt(spread / ((trays - 1) * (size // trays))) / mean
 
 
 def cv_percent(trays: Trays, bout_width_m: float, driving: str) -> float:
     """Coefficient of variation (%) of the overlapped pattern over one bout."""
-    return float(row_cv(bout_pattern(trays, bout_width_m, driving)))
+    return float(row_cv(bout_pattern(trays, bout_width_m, driving), bout_tray_count(bout_width_m, trays.width_m)))
 
 
 def default_widths_m(trays: Trays) -> np.ndarray:

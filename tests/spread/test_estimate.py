@@ -31,8 +31,9 @@ PATTERNS = {
 def exact_cv(name: str) -> float:
     _, cdf, width, driving = PATTERNS[name]
     probs = exact_trays(cdf)
-    bout = pattern._fold_matrix(probs.size, round(width / TRAY_M), driving) @ probs  # numpy, not the kernels
-    return float(100.0 * bout.std(ddof=1) / bout.mean())
+    n = round(width / TRAY_M)
+    bout = pattern._fold_matrix(probs.size, n, driving) @ probs  # numpy, not the kernels
+    return float(100.0 * bout.std(ddof=bout.size // n) / bout.mean())  # a period of 2n: its trays weigh 1/2
 
 
 def draw(name: str, seed: int, granules: int, replicates: int) -> estimate.CvEstimate:
@@ -120,11 +121,12 @@ def test_compiled_bout_cvs_match_numpy_jackknife(driving):
     widths = np.arange(1, 42) * TRAY_M
     cvs, ses = estimate.cv_curve(masses, TRAY_M, driving, widths)
     for w, cv, se in zip(widths, cvs, ses):
-        fold = pattern._fold_matrix(41, round(w / TRAY_M), driving)
+        n = round(w / TRAY_M)
+        fold = pattern._fold_matrix(41, n, driving)
         bouts = masses @ fold.T
 
-        def plain(b):
-            return 100.0 * b.std(ddof=1) / b.mean() if b.size > 1 else 0.0
+        def plain(b):  # ddof 1 over the bout; 2 over a period of 2n (its trays weigh 1/2)
+            return 100.0 * b.std(ddof=b.size // n) / b.mean() if n > 1 else 0.0
 
         raw = plain(bouts.sum(axis=0))
         loo = np.array([plain(np.delete(bouts, i, axis=0).sum(axis=0)) for i in range(6)])
@@ -153,9 +155,11 @@ def test_many_replicates_curve_shared_out_over_threads_keeps_its_bits(driving):
     finally:
         threads.set_threads(None)
     for w, cv, se in list(zip(widths, *alone))[::8]:
-        bouts = masses @ pattern._fold_matrix(33, round(w / TRAY_M), driving).T
+        n = round(w / TRAY_M)
+        bouts = masses @ pattern._fold_matrix(33, n, driving).T
+        ddof = bouts.shape[1] // n  # 1 over a bout, 2 over a period of 2n (its trays weigh 1/2)
         loo = bouts.sum(axis=0) - bouts
-        plain = 100.0 * loo.std(axis=1, ddof=1) / loo.mean(axis=1) if bouts.shape[1] > 1 else np.zeros(300)
-        raw = 100.0 * bouts.sum(axis=0).std(ddof=1) / bouts.sum(axis=0).mean() if bouts.shape[1] > 1 else 0.0
+        plain = 100.0 * loo.std(axis=1, ddof=ddof) / loo.mean(axis=1) if n > 1 else np.zeros(300)
+        raw = 100.0 * bouts.sum(axis=0).std(ddof=ddof) / bouts.sum(axis=0).mean() if n > 1 else 0.0
         np.testing.assert_allclose(cv, max(0.0, 300 * raw - 299 * plain.mean()), rtol=1e-7, atol=1e-9)
         np.testing.assert_allclose(se, np.sqrt(299 / 300 * np.sum((plain - plain.mean()) ** 2)), rtol=1e-7)

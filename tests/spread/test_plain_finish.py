@@ -72,16 +72,18 @@ def test_only_plain_designs_are_plain(library):
 def _fold_pairs_in_numpy(tray_count, counts, driving):
     """`pattern.fold_pairs` as numpy computed it before it was compiled: the order
     `bout_cvs` has always added the pairs in (bout by bout, tray by tray; back-and-forth:
-    unmirrored passes, then mirrored)."""
+    unmirrored passes, then mirrored; an even back-and-forth bout as its 2n-tray period)."""
     m = tray_count // 2
     i = np.arange(-m, m + 1)[None, :]
     n = np.asarray(counts, dtype=np.int64)[:, None]
-    start = np.cumsum(n) - n[:, 0]
     trays = np.broadcast_to(np.arange(tray_count), (n.shape[0], tray_count))
     if driving == "racetrack":
+        start = np.cumsum(n) - n[:, 0]
         return trays.ravel(), (start[:, None] + (i + n // 2) % n).ravel()
+    columns = np.where(n % 2 == 0, 2 * n, n)
+    start = np.cumsum(columns) - columns[:, 0]
     q = np.concatenate([(i + n // 2) % (2 * n), (n - i + n // 2) % (2 * n)], axis=1)
-    hit = q < n
+    hit = q < columns
     return np.concatenate([trays, trays], axis=1)[hit], (start[:, None] + q)[hit]
 
 

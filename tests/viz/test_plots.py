@@ -104,7 +104,7 @@ def test_plan_view_without_tracks_draws_rays(result):
 def test_overlapped_field_matches_bout_pattern(result, driving, bout_width_m):
     trays = result.trays
     n = pattern.bout_tray_count(bout_width_m, trays.width_m)
-    k = np.arange(n) - n // 2
+    k = np.arange(pattern.bout_columns(np.array([n]), driving == "racetrack")[0]) - n // 2  # a bout, or a period
     field = plots.overlapped_field(trays, bout_width_m, driving, k)
     np.testing.assert_allclose(field, pattern.bout_pattern(trays, bout_width_m, driving), rtol=1e-12)
     # Racetrack repeats every bout, back-and-forth every two.
