@@ -127,6 +127,18 @@ def _nulls(values: np.ndarray) -> list:
     return [None if not np.isfinite(v) else float(v) for v in values]
 
 
+def swath_interval(widths_m: np.ndarray, cvs: np.ndarray, ses: np.ndarray,
+                   threshold_percent: float) -> tuple[float, float]:
+    """The effective swaths of the curve moved up and down by SE_MULTIPLE_FOR_SWATH standard
+    errors. Where a CV has no standard error (under 3 replicates) it may be anything: the
+    lower end counts it as failing, the upper as passing, so the interval stays honest
+    instead of shrinking to the swath."""
+    unknown = np.isfinite(cvs) & ~np.isfinite(ses)
+    band = np.where(unknown, np.inf, SE_MULTIPLE_FOR_SWATH * np.where(unknown, 0.0, ses))
+    return (pattern.swath_from_curve(widths_m, cvs + band, threshold_percent),
+            pattern.swath_from_curve(widths_m, np.maximum(cvs - band, 0.0), threshold_percent))
+
+
 def reference_from(scene: Scene, pooled: PooledLandings) -> Reference:
     """The pattern estimate of pooled landings, on the scene's trays and threshold."""
     p = scene.pattern
@@ -134,8 +146,6 @@ def reference_from(scene: Scene, pooled: PooledLandings) -> Reference:
     widths = pattern.default_widths_m(trays) if trays.total_kg > 0.0 else np.zeros(0)  # nothing landed: no curve
     cvs, ses = estimate.cv_curve(masses, p.tray_width_m, p.driving, widths)
     swath = pattern.swath_from_curve(widths, cvs, p.cv_threshold_percent)
-    band = SE_MULTIPLE_FOR_SWATH * np.nan_to_num(ses)
-    interval = (pattern.swath_from_curve(widths, cvs + band, p.cv_threshold_percent),
-                pattern.swath_from_curve(widths, cvs - band, p.cv_threshold_percent))
+    interval = swath_interval(widths, cvs, ses, p.cv_threshold_percent)
     at_target = estimate.estimate_cv(masses, p.tray_width_m, p.target_swath_m, p.driving)
     return Reference(scene, pooled, trays, at_target, widths, cvs, ses, swath, interval)

@@ -139,3 +139,18 @@ def test_a_run_of_one_replicate_gets_a_pilot_that_has_a_standard_error():
     assert precision.pilot_runs_of(odd, 1) == precision.PILOT_RUNS  # below the pilot: refused as before
     result = precision.simulate_precisely(odd, precision_pp=5.0)
     assert result.runs == 3 and result.at_target.standard_error_percent is not None
+
+
+def test_a_swath_without_standard_errors_has_an_interval_that_says_so():
+    """Under 3 replicates no CV has a standard error; the swath's interval took that as an
+    error of 0 and collapsed to the swath itself, as if certain. Now the widths without one
+    count as failing at the lower end and passing at the upper."""
+    from spreadgym.spread.reference import swath_interval
+
+    widths = np.array([1.0, 2.0, 3.0, 4.0])
+    cvs = np.array([0.0, 5.0, 14.0, 30.0])
+    known = np.array([0.0, 0.5, 0.6, 1.0])
+    assert swath_interval(widths, cvs, known, 15.0) == (2.0, 3.0)  # 14 + 1.2 fails, 14 - 1.2 passes
+    unknown = np.array([0.0, np.nan, np.nan, np.nan])
+    assert swath_interval(widths, cvs, unknown, 15.0) == (1.0, 4.0)
+    assert swath_interval(widths, np.array([0.0, 5.0, np.nan, 30.0]), unknown, 15.0) == (1.0, 4.0)
