@@ -30,11 +30,11 @@ def _requested(argv: Sequence[str]) -> Optional[str]:
 
 class OneLineParser(argparse.ArgumentParser):
     """argparse's parser whose usage errors are one line ("spreadgym simulate: error:
-    argument --precision: ...", and where to find the flags) instead of the whole
-    usage block before it. Sub-command parsers are made of the same class."""
+    argument --precision: ...") instead of the whole usage block before it (`--help`
+    shows that). Sub-command parsers are made of the same class."""
 
     def error(self, message: str):
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
 def build_parser(argv: Sequence[str] = ()) -> tuple[argparse.ArgumentParser, Optional[ModuleType]]:
