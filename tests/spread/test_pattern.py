@@ -135,6 +135,16 @@ def test_triangle_worked_case(driving, width, expected):
     assert cv == pytest.approx(sample_cv(brute_force_bout(trays, n, driving), n), abs=1e-9)
 
 
+@pytest.mark.parametrize("peak_x_m", [10.0, -10.0])
+@pytest.mark.parametrize("width, racetrack, back_and_forth", [(10.0, 11.8, 19.7), (15.0, 23.4, 49.8)])
+def test_skewed_triangle_worked_case(peak_x_m, width, racetrack, back_and_forth):
+    """docs/flight-and-pattern.md's skewed rows, whichever way the triangle leans (the
+    even strip gave 21.2 % at 10 m leaning right and 18.0 % leaning left)."""
+    trays = triangle_trays(30.0, peak_x_m=peak_x_m)
+    assert abs(cv_percent(trays, width, "racetrack") - racetrack) < 0.05
+    assert abs(cv_percent(trays, width, "back-and-forth") - back_and_forth) < 0.05
+
+
 @pytest.mark.parametrize("driving", DRIVING)
 @pytest.mark.parametrize("width, expected", [(20.0, 6.1), (24.0, 15.9)])
 def test_gaussian_worked_case(driving, width, expected):
