@@ -154,3 +154,17 @@ def test_a_swath_without_standard_errors_has_an_interval_that_says_so():
     unknown = np.array([0.0, np.nan, np.nan, np.nan])
     assert swath_interval(widths, cvs, unknown, 15.0) == (1.0, 4.0)
     assert swath_interval(widths, np.array([0.0, 5.0, np.nan, 30.0]), unknown, 15.0) == (1.0, 4.0)
+
+
+def test_the_precision_bench_rows_run():
+    """`make bench` section precision read a swath off the pooled estimate after it had moved
+    to the estimate's reference (an AttributeError on the first scene); two loose seeds of
+    the shipped paper reference now give a row."""
+    from pathlib import Path
+
+    from spreadgym.studies.estimate_bench import precision_rows
+
+    references = Path(__file__).resolve().parents[2] / "docs" / "bench" / "references"
+    (row,) = precision_rows(references, seeds=2, names=("paper",), precision_pp=2.0)
+    assert row["scene"] == "paper" and row["seeds"] == 2 and 0 <= row["swath_equal_seeds"] <= 2
+    assert row["runs_median"] == precision.PILOT_RUNS  # 2 pp: the pilot alone
