@@ -125,7 +125,7 @@ def test_compiled_bout_cvs_match_numpy_jackknife(driving):
         fold = pattern._fold_matrix(41, n, driving)
         bouts = masses @ fold.T
 
-        def plain(b):  # ddof 1 over the bout; 2 over a period of 2n (its trays weigh 1/2)
+        def plain(b, n=n):  # ddof 1 over the bout; 2 over a period of 2n (its trays weigh 1/2)
             return 100.0 * b.std(ddof=b.size // n) / b.mean() if n > 1 else 0.0
 
         raw = plain(bouts.sum(axis=0))
