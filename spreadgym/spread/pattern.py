@@ -25,7 +25,7 @@ Conventions (x across the track, to the right of the machine; SI units):
   values are exactly those of the whole 2W period (each counted once instead of
   twice). With n even a strip would hold the tray on one kind of bout's midline and
   not the one on the other's, so its CV would change when the pattern is mirrored
-  (by up to 3 pp on the field scene); the bout is then the whole period of 2n
+  (by over 3 pp on the field scene); the bout is then the whole period of 2n
   trays, in which every value of the field appears twice but the two midline trays
   once (`bout_columns`). A symmetric pattern gives the same field, hence the same
   numbers, for both driving patterns.
@@ -220,10 +220,11 @@ def fold_pairs_cached(tray_count: int, counts: tuple, driving: str) -> tuple[np.
 
 def fold_pairs(tray_count: int, counts: np.ndarray, driving: str) -> tuple[np.ndarray, np.ndarray]:
     """How a row of T trays (centred on the axis) overlaps into bouts of counts[j] trays,
-    the bouts side by side (bout j starts at column sum(counts[:j])): every (tray index
-    0..T-1, column) where tray i adds its mass to the bout.
+    the bouts side by side (bout j starts at column sum(columns[:j]), `bout_columns`):
+    every (tray index 0..T-1, column) where tray i adds its mass to the bout.
 
-    Bout tray q sits at grid index k_q = q - n // 2 (centres in [-W/2, W/2)).
+    Bout tray q sits at grid index k_q = q - n // 2 (centres in [-W/2, W/2), or up to
+    3W/2 for a back-and-forth period).
     Racetrack: tray i reaches k when k = i (mod n), so q = (i + n // 2) mod n.
     Back-and-forth: unmirrored passes (even j) put tray i at k = i + j n, i.e.
     k = i (mod 2n); mirrored passes (odd j) put it at k = j n - i, i.e.
