@@ -32,9 +32,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
+    """The rows as CSV, with every key any row has (in first-seen order; a row without one
+    leaves its cell empty: the web section's plate row alone counts aborted requests)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="", encoding="utf-8") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer = csv.DictWriter(handle, fieldnames=list(dict.fromkeys(key for row in rows for key in row)),
+                                restval="")
         writer.writeheader()
         writer.writerows(rows)
 
