@@ -133,8 +133,7 @@ def swath_interval(widths_m: np.ndarray, cvs: np.ndarray, ses: np.ndarray,
     errors. Where a CV has no standard error (under 3 replicates) it may be anything: the
     lower end counts it as failing, the upper as passing, so the interval stays honest
     instead of shrinking to the swath."""
-    unknown = np.isfinite(cvs) & ~np.isfinite(ses)
-    band = np.where(unknown, np.inf, SE_MULTIPLE_FOR_SWATH * np.where(unknown, 0.0, ses))
+    band = np.where(np.isfinite(cvs) & ~np.isfinite(ses), np.inf, SE_MULTIPLE_FOR_SWATH * ses)
     return (pattern.swath_from_curve(widths_m, cvs + band, threshold_percent),
             pattern.swath_from_curve(widths_m, np.maximum(cvs - band, 0.0), threshold_percent))
 
