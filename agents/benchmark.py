@@ -144,6 +144,15 @@ def policy_dir(out: Path, rung_key: str, algo: str, seed: int) -> Path:
     return out / rung_key / algo / f"seed{seed}"
 
 
+def method_policy_dir(out: Path, rung: Rung, method: str, seed: int) -> Optional[Path]:
+    """The run folder whose policy `method` scores on `rung` (its own training, or the exact
+    properties' for EXACT_POLICY), or None for a method that is no trained policy."""
+    if method not in TRAINED and method not in EXACT_POLICY:
+        return None
+    source, algo = EXACT_POLICY.get(method, (rung.key, method))
+    return policy_dir(out, source, algo, seed)
+
+
 # -- work ------------------------------------------------------------------------------------
 
 def rung_env(rung: Rung):
@@ -182,9 +191,8 @@ def score_run(out: Path, rung: Rung, method: str, seed: int, env=None, jobs=None
     path = score_path(out, rung, method, seed)
     done = read_json(path)
     trained = None
-    if method in TRAINED or method in EXACT_POLICY:
-        source, algo = EXACT_POLICY.get(method, (rung.key, method))
-        folder = policy_dir(out, source, algo, seed)
+    folder = method_policy_dir(out, rung, method, seed)
+    if folder is not None:
         trained = trained_record(folder)
         if trained is None:
             raise SpreadgymError(f"{method} seed {seed} of {rung.key}: {folder} holds no policy trained to its end "
@@ -432,11 +440,10 @@ def run_rung(out: Path, rung: Rung, methods: Optional[Sequence[str]] = None, par
     if "score" in parts:
         for method in methods:
             for seed in range(runs_of(rung, method)):
-                if method in TRAINED or method in EXACT_POLICY:
-                    source, algo = EXACT_POLICY.get(method, (rung.key, method))
-                    if trained_record(policy_dir(out, source, algo, seed)) is None:
-                        progress(f"{rung.key}: {method} seed {seed} not trained to its end yet")
-                        continue
+                folder = method_policy_dir(out, rung, method, seed)
+                if folder is not None and trained_record(folder) is None:
+                    progress(f"{rung.key}: {method} seed {seed} not trained to its end yet")
+                    continue
                 progress(f"{rung.key}: scoring {method} seed {seed} (or its score, where it is this policy's)")
                 score_run(out, rung, method, seed, env, jobs)
 
